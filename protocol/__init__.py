@@ -1,0 +1,1 @@
+"""Wire contract of sharedctl: CAN (ODrive CANSimple) and Zenoh (MessagePack) codecs. Pure."""

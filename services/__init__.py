@@ -1,0 +1,1 @@
+"""Processes and command-line shells of sharedctl: I/O, timing, configuration."""
