@@ -1,13 +1,36 @@
-"""`sharedctl` command line: one sub-command per tool."""
+"""`sharedctl` command line: one sub-command per module.
+
+Each module named in COMMANDS defines ``add_parser(subparsers)``, which adds its
+sub-command and sets ``handler`` (a function taking the parsed args, returning an
+exit code) with ``parser.set_defaults(handler=...)``.
+"""
 from __future__ import annotations
 
 import argparse
+import importlib
 import sys
+
+COMMANDS = (
+    "sharedctl.services.sim_command",
+    "sharedctl.services.paper_command",
+    "sharedctl.services.fuzz_command",
+)
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="sharedctl", description=__doc__)
-    parser.add_subparsers(dest="command", required=True)
+    parser = argparse.ArgumentParser(
+        prog="sharedctl",
+        description="Shared-control teleoperation: simulation, services and tools.",
+    )
+    subparsers = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    for module_name in COMMANDS:
+        try:
+            module = importlib.import_module(module_name)
+        except ModuleNotFoundError as exc:  # a command not built yet must not break the others
+            if exc.name != module_name:
+                raise
+            continue
+        module.add_parser(subparsers)
     return parser
 
 
