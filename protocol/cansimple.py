@@ -1,0 +1,452 @@
+"""ODrive CANSimple (firmware 0.6 layout) codec: typed frames <-> :class:`CanFrame`.
+
+One table (:data:`FRAME_SPECS`) describes every implemented command: DBC name,
+command id, DLC, sender and signals (start bit, length, type, unit). The codec,
+the DBC generator (:mod:`.dbc`) and protocol/README.md all follow that table.
+
+Rules
+-----
+* Little-endian (Intel) signals; floats are IEEE-754 float32.
+* Float fields are rounded to float32 when a typed frame is built, so a typed
+  frame equals what the bus carries; NaN/inf are refused (:class:`NonFiniteValue`),
+  magnitudes beyond float32 are :class:`OutOfRange`.
+* Data frames must have exactly the DLC of ODrive's published DBC
+  (:class:`BadLength`); unused bits are written as zero and ignored on decode.
+* Get_* commands may be polled with a remote (RTR) frame of DLC 0 or the DBC DLC;
+  decoding such a frame yields :class:`PollRequest`. RTR on anything else is
+  :class:`UnexpectedRemote`.
+"""
+from __future__ import annotations
+
+import math
+import struct
+from collections.abc import Collection
+from dataclasses import dataclass, fields
+from typing import Literal
+
+from .canframe import CanFrame, arbitration_id, check_node_id, split_arbitration_id
+from .errors import (
+    BadArbitrationId,
+    BadLength,
+    BadNodeId,
+    NonFiniteValue,
+    OutOfRange,
+    UnexpectedRemote,
+    UnknownCommand,
+    WrongType,
+)
+from .odrive_enums import AxisState, CommandId, ControlMode, InputMode, ODriveError, ProcedureResult
+
+_F32 = struct.Struct("<f")
+SignalKind = Literal["float", "enum", "flag", "bool"]
+
+
+def to_float32(value: object, what: str = "value", minimum: float | None = None) -> float:
+    """Return ``value`` rounded to the nearest float32, refusing NaN/inf and overflow."""
+    if type(value) is not float:
+        if isinstance(value, bool):
+            raise WrongType(f"{what} must be a real number, not a bool")
+        if not isinstance(value, (int, float)):
+            try:
+                value = float(value.__float__())  # numpy scalars
+            except (AttributeError, TypeError, ValueError, OverflowError):
+                raise WrongType(f"{what} must be a real number") from None
+        else:
+            value = float(value)
+    if not math.isfinite(value):
+        raise NonFiniteValue(f"{what} is not finite")
+    try:
+        value = _F32.unpack(_F32.pack(value))[0]
+    except OverflowError:
+        raise OutOfRange(f"{what} exceeds the float32 range") from None
+    if minimum is not None and value < minimum:
+        raise OutOfRange(f"{what} {value} is below {minimum}")
+    return value
+
+
+@dataclass(frozen=True, slots=True)
+class SignalSpec:
+    """One DBC signal: name, bit position, type, unit and the typed-frame attribute."""
+
+    name: str
+    attr: str
+    start: int
+    length: int
+    kind: SignalKind
+    unit: str = ""
+    enum: type | None = None
+    minimum: float | None = None
+
+    @property
+    def mask(self) -> int:
+        return (1 << self.length) - 1
+
+    def coerce(self, value: object) -> object:
+        """Validate a Python value for this signal and return its canonical form."""
+        if self.kind == "float":
+            return to_float32(value, self.attr, self.minimum)
+        if self.kind == "bool":
+            if not isinstance(value, bool):
+                raise WrongType(f"{self.attr} must be a bool")
+            return value
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise WrongType(f"{self.attr} must be an int or {self.enum.__name__}")
+        if not 0 <= value <= self.mask:
+            raise OutOfRange(f"{self.attr} {value} does not fit in {self.length} bits")
+        try:
+            return self.enum(value)
+        except ValueError:
+            raise OutOfRange(f"{self.attr} {value} is not a {self.enum.__name__}") from None
+
+    def to_raw(self, value: object) -> int:
+        """Bits of an already-coerced value."""
+        if self.kind == "float":
+            return int.from_bytes(_F32.pack(value), "little")
+        return int(value)
+
+    def from_raw(self, bits: int) -> object:
+        """Canonical value of the raw bits (raises the typed error for invalid bits)."""
+        if self.kind == "float":
+            return to_float32(_F32.unpack(bits.to_bytes(4, "little"))[0], self.attr, self.minimum)
+        if self.kind == "bool":
+            if bits > 1:
+                raise OutOfRange(f"{self.attr} {bits} is neither 0 nor 1")
+            return bool(bits)
+        return self.coerce(bits)
+
+
+@dataclass(frozen=True, slots=True)
+class FrameSpec:
+    """One CANSimple command: DBC name (without ``AxisN_``), id, DLC, sender, signals."""
+
+    cmd: CommandId
+    name: str
+    dlc: int
+    sender: Literal["host", "odrive"]
+    signals: tuple[SignalSpec, ...]
+    comment: str
+
+    @property
+    def pollable(self) -> bool:
+        """Get_* frames are sent by the ODrive and may be requested with RTR."""
+        return self.sender == "odrive" and self.name.startswith("Get_")
+
+
+def _normalize(frame: object) -> None:
+    object.__setattr__(frame, "node_id", check_node_id(frame.node_id))
+    for sig in FRAME_SPECS[type(frame)].signals:
+        object.__setattr__(frame, sig.attr, sig.coerce(getattr(frame, sig.attr)))
+
+
+@dataclass(frozen=True, slots=True)
+class Heartbeat:
+    """0x01 ODrive -> host, cyclic: axis error bits, state, procedure result, trajectory done."""
+
+    node_id: int
+    axis_error: ODriveError = ODriveError.NONE
+    axis_state: AxisState = AxisState.IDLE
+    procedure_result: ProcedureResult = ProcedureResult.SUCCESS
+    trajectory_done: bool = False
+
+    def __post_init__(self) -> None:
+        _normalize(self)
+
+
+@dataclass(frozen=True, slots=True)
+class Estop:
+    """0x02 host -> ODrive, DLC 0: disarm the axis with ESTOP_REQUESTED."""
+
+    node_id: int
+
+    def __post_init__(self) -> None:
+        _normalize(self)
+
+
+@dataclass(frozen=True, slots=True)
+class GetError:
+    """0x03 ODrive -> host: active errors and the reason of the last disarm."""
+
+    node_id: int
+    active_errors: ODriveError = ODriveError.NONE
+    disarm_reason: ODriveError = ODriveError.NONE
+
+    def __post_init__(self) -> None:
+        _normalize(self)
+
+
+@dataclass(frozen=True, slots=True)
+class SetAxisState:
+    """0x07 host -> ODrive: request an axis state (e.g. CLOSED_LOOP_CONTROL, IDLE)."""
+
+    node_id: int
+    requested_state: AxisState
+
+    def __post_init__(self) -> None:
+        _normalize(self)
+
+
+@dataclass(frozen=True, slots=True)
+class GetEncoderEstimates:
+    """0x09 ODrive -> host, cyclic: position [turns] and velocity [turns/s] estimates."""
+
+    node_id: int
+    pos_estimate: float
+    vel_estimate: float
+
+    def __post_init__(self) -> None:
+        _normalize(self)
+
+
+@dataclass(frozen=True, slots=True)
+class SetControllerMode:
+    """0x0B host -> ODrive: control mode and input mode."""
+
+    node_id: int
+    control_mode: ControlMode
+    input_mode: InputMode
+
+    def __post_init__(self) -> None:
+        _normalize(self)
+
+
+@dataclass(frozen=True, slots=True)
+class SetInputVel:
+    """0x0D host -> ODrive: velocity setpoint [turns/s] and torque feed-forward [Nm]."""
+
+    node_id: int
+    input_vel: float
+    input_torque_ff: float = 0.0
+
+    def __post_init__(self) -> None:
+        _normalize(self)
+
+
+@dataclass(frozen=True, slots=True)
+class SetInputTorque:
+    """0x0E host -> ODrive: torque setpoint [Nm]."""
+
+    node_id: int
+    input_torque: float
+
+    def __post_init__(self) -> None:
+        _normalize(self)
+
+
+@dataclass(frozen=True, slots=True)
+class SetLimits:
+    """0x0F host -> ODrive: velocity limit [turns/s] and current limit [A], both >= 0."""
+
+    node_id: int
+    velocity_limit: float
+    current_limit: float
+
+    def __post_init__(self) -> None:
+        _normalize(self)
+
+
+@dataclass(frozen=True, slots=True)
+class GetIq:
+    """0x14 ODrive -> host: q-axis current setpoint and measurement [A]."""
+
+    node_id: int
+    iq_setpoint: float
+    iq_measured: float
+
+    def __post_init__(self) -> None:
+        _normalize(self)
+
+
+@dataclass(frozen=True, slots=True)
+class GetBusVoltageCurrent:
+    """0x17 ODrive -> host: DC bus voltage [V] and current [A]."""
+
+    node_id: int
+    bus_voltage: float
+    bus_current: float
+
+    def __post_init__(self) -> None:
+        _normalize(self)
+
+
+@dataclass(frozen=True, slots=True)
+class ClearErrors:
+    """0x18 host -> ODrive, DLC 1: clear errors (and leave ESTOP); identify blinks the LED."""
+
+    node_id: int
+    identify: bool = False
+
+    def __post_init__(self) -> None:
+        _normalize(self)
+
+
+@dataclass(frozen=True, slots=True)
+class GetTorques:
+    """0x1C ODrive -> host: torque target and torque estimate [Nm]."""
+
+    node_id: int
+    torque_target: float
+    torque_estimate: float
+
+    def __post_init__(self) -> None:
+        _normalize(self)
+
+
+@dataclass(frozen=True, slots=True)
+class PollRequest:
+    """A remote (RTR) frame asking node ``node_id`` to send its ``command`` (a Get_* frame)."""
+
+    node_id: int
+    command: CommandId
+    dlc: int = 8
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "node_id", check_node_id(self.node_id))
+        if isinstance(self.command, bool) or not isinstance(self.command, int):
+            raise WrongType("command must be a CommandId")
+        try:
+            command = CommandId(self.command)
+        except ValueError:
+            raise UnknownCommand(f"command id {self.command!r} is not implemented") from None
+        spec = SPEC_BY_CMD[command]
+        if not spec.pollable:
+            raise UnexpectedRemote(f"{spec.name} cannot be polled with RTR")
+        if isinstance(self.dlc, bool) or not isinstance(self.dlc, int):
+            raise WrongType("dlc must be an int")
+        if self.dlc not in (0, spec.dlc):
+            raise BadLength(f"RTR for {spec.name} must have DLC 0 or {spec.dlc}")
+        object.__setattr__(self, "command", command)
+
+
+CanMessage = (
+    Heartbeat | Estop | GetError | SetAxisState | GetEncoderEstimates | SetControllerMode
+    | SetInputVel | SetInputTorque | SetLimits | GetIq | GetBusVoltageCurrent | ClearErrors
+    | GetTorques | PollRequest
+)
+
+
+def _f(name: str, attr: str, start: int, unit: str, minimum: float | None = None) -> SignalSpec:
+    return SignalSpec(name, attr, start, 32, "float", unit, None, minimum)
+
+
+def _u(name: str, attr: str, start: int, length: int, kind: SignalKind, enum: type | None = None) -> SignalSpec:
+    return SignalSpec(name, attr, start, length, kind, "", enum)
+
+
+_C = CommandId
+FRAME_SPECS: dict[type, FrameSpec] = {
+    Heartbeat: FrameSpec(_C.HEARTBEAT, "Heartbeat", 8, "odrive", (
+        _u("Axis_Error", "axis_error", 0, 32, "flag", ODriveError),
+        _u("Axis_State", "axis_state", 32, 8, "enum", AxisState),
+        _u("Procedure_Result", "procedure_result", 40, 8, "enum", ProcedureResult),
+        _u("Trajectory_Done_Flag", "trajectory_done", 48, 1, "bool"),
+    ), "Cyclic status of the axis."),
+    Estop: FrameSpec(_C.ESTOP, "Estop", 0, "host", (), "Disarm the axis (ESTOP_REQUESTED)."),
+    GetError: FrameSpec(_C.GET_ERROR, "Get_Error", 8, "odrive", (
+        _u("Active_Errors", "active_errors", 0, 32, "flag", ODriveError),
+        _u("Disarm_Reason", "disarm_reason", 32, 32, "flag", ODriveError),
+    ), "Active errors and the error that caused the last disarm."),
+    SetAxisState: FrameSpec(_C.SET_AXIS_STATE, "Set_Axis_State", 8, "host", (
+        _u("Axis_Requested_State", "requested_state", 0, 32, "enum", AxisState),
+    ), "Request an axis state."),
+    GetEncoderEstimates: FrameSpec(_C.GET_ENCODER_ESTIMATES, "Get_Encoder_Estimates", 8, "odrive", (
+        _f("Pos_Estimate", "pos_estimate", 0, "rev"),
+        _f("Vel_Estimate", "vel_estimate", 32, "rev/s"),
+    ), "Position and velocity estimates."),
+    SetControllerMode: FrameSpec(_C.SET_CONTROLLER_MODE, "Set_Controller_Mode", 8, "host", (
+        _u("Control_Mode", "control_mode", 0, 32, "enum", ControlMode),
+        _u("Input_Mode", "input_mode", 32, 32, "enum", InputMode),
+    ), "Set control mode and input mode."),
+    SetInputVel: FrameSpec(_C.SET_INPUT_VEL, "Set_Input_Vel", 8, "host", (
+        _f("Input_Vel", "input_vel", 0, "rev/s"),
+        _f("Input_Torque_FF", "input_torque_ff", 32, "Nm"),
+    ), "Velocity setpoint with torque feed-forward."),
+    SetInputTorque: FrameSpec(_C.SET_INPUT_TORQUE, "Set_Input_Torque", 8, "host", (
+        _f("Input_Torque", "input_torque", 0, "Nm"),
+    ), "Torque setpoint."),
+    SetLimits: FrameSpec(_C.SET_LIMITS, "Set_Limits", 8, "host", (
+        _f("Velocity_Limit", "velocity_limit", 0, "rev/s", 0.0),
+        _f("Current_Limit", "current_limit", 32, "A", 0.0),
+    ), "Velocity and current limits (sharedctl refuses negative limits)."),
+    GetIq: FrameSpec(_C.GET_IQ, "Get_Iq", 8, "odrive", (
+        _f("Iq_Setpoint", "iq_setpoint", 0, "A"),
+        _f("Iq_Measured", "iq_measured", 32, "A"),
+    ), "q-axis current setpoint and measurement."),
+    GetBusVoltageCurrent: FrameSpec(_C.GET_BUS_VOLTAGE_CURRENT, "Get_Bus_Voltage_Current", 8, "odrive", (
+        _f("Bus_Voltage", "bus_voltage", 0, "V"),
+        _f("Bus_Current", "bus_current", 32, "A"),
+    ), "DC bus voltage and current."),
+    ClearErrors: FrameSpec(_C.CLEAR_ERRORS, "Clear_Errors", 1, "host", (
+        _u("Identify", "identify", 0, 8, "bool"),
+    ), "Clear errors; Identify=1 also blinks the LED (sharedctl accepts only 0 or 1)."),
+    GetTorques: FrameSpec(_C.GET_TORQUES, "Get_Torques", 8, "odrive", (
+        _f("Torque_Target", "torque_target", 0, "Nm"),
+        _f("Torque_Estimate", "torque_estimate", 32, "Nm"),
+    ), "Torque target and torque estimate."),
+}
+SPEC_BY_CMD: dict[CommandId, FrameSpec] = {spec.cmd: spec for spec in FRAME_SPECS.values()}
+CLASS_BY_CMD: dict[int, type] = {int(spec.cmd): cls for cls, spec in FRAME_SPECS.items()}
+POLLABLE_COMMANDS: frozenset[CommandId] = frozenset(s.cmd for s in FRAME_SPECS.values() if s.pollable)
+
+assert all(  # the table and the dataclasses describe the same fields
+    [f.name for f in fields(cls)][1:] == [s.attr for s in spec.signals] for cls, spec in FRAME_SPECS.items()
+)
+
+
+def encode(message: CanMessage) -> CanFrame:
+    """Encode a typed frame (or :class:`PollRequest`) as a :class:`CanFrame`."""
+    if isinstance(message, PollRequest):
+        return CanFrame(arbitration_id(message.node_id, message.command), b"", True, message.dlc)
+    spec = FRAME_SPECS.get(type(message))
+    if spec is None:
+        raise WrongType(f"{type(message).__name__} is not a CANSimple frame type")
+    raw = 0
+    for sig in spec.signals:  # values were validated when the frame was built; re-check anyway
+        raw |= (sig.to_raw(sig.coerce(getattr(message, sig.attr))) & sig.mask) << sig.start
+    return CanFrame(arbitration_id(message.node_id, spec.cmd), raw.to_bytes(spec.dlc, "little"))
+
+
+def poll(node_id: int, command: CommandId, dlc: int = 8) -> CanFrame:
+    """RTR frame requesting the Get_* ``command`` from ``node_id``."""
+    return encode(PollRequest(node_id, command, dlc))
+
+
+def decode_frame(frame: CanFrame, *, nodes: Collection[int] | None = None) -> CanMessage:
+    """Decode a :class:`CanFrame` to a typed frame, or raise a :class:`ProtocolError`.
+
+    ``nodes`` restricts the accepted node ids (e.g. :data:`DEFAULT_WHEEL_NODES`);
+    ``None`` accepts 0..63.
+    """
+    if not isinstance(frame, CanFrame):
+        raise WrongType("decode_frame takes a CanFrame")
+    if frame.is_extended_id:
+        raise BadArbitrationId("CANSimple uses 11-bit standard ids; got an extended id")
+    node_id, cmd_id = split_arbitration_id(frame.arbitration_id)
+    if nodes is not None and node_id not in nodes:
+        raise BadNodeId(f"node {node_id} is not a configured node")
+    cls = CLASS_BY_CMD.get(cmd_id)
+    if cls is None:
+        raise UnknownCommand(f"command id 0x{cmd_id:02X} is not implemented")
+    spec = FRAME_SPECS[cls]
+    if frame.is_remote:
+        if not spec.pollable:
+            raise UnexpectedRemote(f"RTR on {spec.name}, which is not a Get_* frame")
+        return PollRequest(node_id, spec.cmd, frame.dlc)
+    if frame.dlc != spec.dlc:
+        raise BadLength(f"{spec.name} has DLC {spec.dlc}, got {frame.dlc}")
+    raw = int.from_bytes(frame.data, "little")
+    values = [sig.from_raw((raw >> sig.start) & sig.mask) for sig in spec.signals]
+    return cls(node_id, *values)
+
+
+def decode(
+    arbitration_id: int,
+    data: bytes,
+    is_remote: bool = False,
+    *,
+    dlc: int | None = None,
+    is_extended_id: bool = False,
+    nodes: Collection[int] | None = None,
+) -> CanMessage:
+    """Decode raw frame fields (as python-can's ``Message`` carries them)."""
+    frame = CanFrame(arbitration_id, data, is_remote, dlc, is_extended_id)
+    return decode_frame(frame, nodes=nodes)
