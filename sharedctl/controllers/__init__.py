@@ -1,0 +1,15 @@
+"""Machine controllers, one law per constraint group (paper Section 3)."""
+from .base import LawOutput, MachineLaw
+from .certainty_equivalent import CertaintyEquivalentLaw
+from .non_certainty_equivalent import NonCertaintyEquivalentLaw
+from .output_feedback import OutputFeedbackLaw
+from .observer import VelocityObserver
+
+__all__ = [
+    "LawOutput",
+    "MachineLaw",
+    "CertaintyEquivalentLaw",
+    "NonCertaintyEquivalentLaw",
+    "OutputFeedbackLaw",
+    "VelocityObserver",
+]

@@ -1,0 +1,151 @@
+"""Admissible sets: polytopes {q : K q + T ≤ 0} (paper (2)) and unions of them.
+
+A *group* (paper (3)) is n rows of one polytope with an invertible n×n matrix K_i;
+its coordinates are x^i = K_i q + T_i and feasibility means every x^i_j < 0.
+
+* m < n (or rank K < n): the polytope is completed with far rows e_jᵀ q − α ≤ 0
+  along coordinate directions missing from the row space (Section 3.1: "augment
+  constraints … with a sufficiently large constant α").
+* m > n: every choice of n rows with a well-conditioned K_i is a group.
+* A non-convex feasible set is a union of polytopes; each polytope brings its own
+  groups, and a group applies only where its polytope contains q.
+"""
+from __future__ import annotations
+
+import itertools
+from dataclasses import dataclass
+
+import numpy as np
+
+
+class ConstraintError(ValueError):
+    """A constraint set that cannot be used (bad shapes, empty, no invertible group)."""
+
+
+@dataclass(frozen=True)
+class Polytope:
+    """{q : K q + T ≤ 0}, rows normalised to unit length so slack is a distance."""
+
+    K: np.ndarray
+    T: np.ndarray
+
+    @staticmethod
+    def from_rows(K, T) -> "Polytope":
+        K = np.atleast_2d(np.asarray(K, dtype=float))
+        T = np.asarray(T, dtype=float).reshape(-1)
+        if K.shape[0] != T.shape[0] or K.shape[0] == 0:
+            raise ConstraintError(f"K has {K.shape[0]} rows but T has {T.shape[0]} entries")
+        if not (np.all(np.isfinite(K)) and np.all(np.isfinite(T))):
+            raise ConstraintError("K and T must be finite")
+        norms = np.linalg.norm(K, axis=1)
+        if np.any(norms < 1e-12):
+            raise ConstraintError("a row of K is zero")
+        return Polytope(K / norms[:, None], T / norms)
+
+    @property
+    def n(self) -> int:
+        return self.K.shape[1]
+
+    def values(self, q: np.ndarray) -> np.ndarray:
+        """K q + T: negative inside, zero on a face."""
+        return self.K @ q + self.T
+
+    def margin(self, q: np.ndarray) -> float:
+        """Smallest slack −max_j (K q + T)_j: positive inside, negative outside."""
+        return float(-np.max(self.values(q)))
+
+    def contains(self, q: np.ndarray) -> bool:
+        return bool(np.all(self.values(q) < 0.0))
+
+
+@dataclass(frozen=True)
+class ConstraintGroup:
+    """n rows of one polytope with invertible K_i (paper (3))."""
+
+    region: int                 # index of the polytope in the feasible set
+    rows: tuple[int, ...]       # row indices into the (completed) polytope
+    K: np.ndarray               # n×n
+    T: np.ndarray               # n
+    K_inv: np.ndarray
+
+    def values(self, q: np.ndarray) -> np.ndarray:
+        """x^i = K_i q + T_i."""
+        return self.K @ q + self.T
+
+
+@dataclass(frozen=True)
+class FeasibleSet:
+    """A union of polytopes Q_a = ∪_r {K_r q + T_r ≤ 0}, with its constraint groups."""
+
+    regions: tuple[Polytope, ...]
+    groups: tuple[ConstraintGroup, ...]
+    completion_distance: float
+
+    @staticmethod
+    def from_regions(regions, completion_distance: float = 1.0e3, max_condition: float = 1.0e6) -> "FeasibleSet":
+        """Complete every polytope to full rank and enumerate its groups."""
+        polys = tuple(complete(r, completion_distance) for r in regions)
+        if not polys:
+            raise ConstraintError("a feasible set needs at least one region")
+        n = polys[0].n
+        if any(p.n != n for p in polys):
+            raise ConstraintError("all regions must have the same dimension")
+        groups: list[ConstraintGroup] = []
+        for index, poly in enumerate(polys):
+            found = enumerate_groups(poly, index, max_condition)
+            if not found:
+                raise ConstraintError(f"region {index} has no invertible group of {n} rows")
+            groups.extend(found)
+        return FeasibleSet(polys, tuple(groups), completion_distance)
+
+    @property
+    def n(self) -> int:
+        return self.regions[0].n
+
+    def containing_regions(self, q: np.ndarray) -> list[int]:
+        """Indices of the polytopes that contain q (strictly)."""
+        return [i for i, r in enumerate(self.regions) if r.contains(q)]
+
+    def contains(self, q: np.ndarray) -> bool:
+        return any(r.contains(q) for r in self.regions)
+
+    def margin(self, q: np.ndarray) -> float:
+        """The best region's smallest slack: > 0 inside the union, ≤ 0 outside."""
+        return max(r.margin(q) for r in self.regions)
+
+    def region_margins(self, q: np.ndarray) -> np.ndarray:
+        return np.array([r.margin(q) for r in self.regions])
+
+    def applicable_groups(self, q: np.ndarray) -> list[int]:
+        """Groups whose polytope contains q ("which groups apply here")."""
+        inside = set(self.containing_regions(q))
+        return [g for g, grp in enumerate(self.groups) if grp.region in inside]
+
+
+def complete(poly: Polytope, distance: float) -> Polytope:
+    """Add far rows e_jᵀ q − distance ≤ 0 until the rows span R^n."""
+    K, T = poly.K, poly.T
+    n = poly.n
+    rank = np.linalg.matrix_rank(K, tol=1e-9)
+    for j in range(n):
+        if rank == n:
+            break
+        e = np.zeros(n)
+        e[j] = 1.0
+        candidate = np.vstack([K, e])
+        if np.linalg.matrix_rank(candidate, tol=1e-9) > rank:
+            K, T = candidate, np.append(T, -distance)
+            rank += 1
+    return Polytope(K, T)
+
+
+def enumerate_groups(poly: Polytope, region: int, max_condition: float) -> list[ConstraintGroup]:
+    """Every choice of n rows whose K_i is invertible (condition number below max_condition)."""
+    n = poly.n
+    groups = []
+    for rows in itertools.combinations(range(poly.K.shape[0]), n):
+        K = poly.K[list(rows)]
+        if np.linalg.cond(K) > max_condition:
+            continue
+        groups.append(ConstraintGroup(region, rows, K, poly.T[list(rows)], np.linalg.inv(K)))
+    return groups

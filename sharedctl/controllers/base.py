@@ -1,0 +1,57 @@
+"""What every machine law looks like: explicit state in, command and state rate out."""
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..constraints import ConstraintGroup
+from ..models import EulerLagrangeModel
+from ..transform import GroupCoordinates
+
+
+@dataclass(frozen=True)
+class LawOutput:
+    """u_f (generalised force), θ̂̇ (the shared estimate's rate) and the law's own state rate."""
+
+    u: np.ndarray
+    theta_dot: np.ndarray
+    state_dot: np.ndarray
+
+
+class MachineLaw(ABC):
+    """A machine controller for one constraint group.
+
+    State feedback laws receive the measured velocity v; the output-feedback law receives
+    the observer's v̂ and uses it only where docs/control.md says. The parameter
+    estimate θ̂ is shared by all groups (one robot, one θ) and owned by the caller.
+    """
+
+    name: str
+    #: λ_q of (11): sets p and the selection Lyapunov value
+    lam: float = 1.0
+
+    @abstractmethod
+    def state_size(self, model: EulerLagrangeModel) -> int:
+        """Length of the law's own state vector (filters), 0 if none."""
+
+    @abstractmethod
+    def initial_state(self, model, group, c: GroupCoordinates, q, v, theta_hat) -> np.ndarray:
+        """The law's state when it takes over (its published initial conditions)."""
+
+    @abstractmethod
+    def evaluate(self, model, group: ConstraintGroup, c: GroupCoordinates, q, v, theta_hat, state) -> LawOutput:
+        """u_f, θ̂̇ and the state rate at one instant."""
+
+    def estimate(self, theta_hat: np.ndarray, state: np.ndarray) -> np.ndarray:
+        """The parameter estimate this law currently stands for (θ̂, or θ̂ + β for (13))."""
+        return theta_hat
+
+
+def diag_gain(value, n: int) -> np.ndarray:
+    """A positive gain given as a scalar or a length-n list, as a vector."""
+    arr = np.broadcast_to(np.asarray(value, dtype=float), (n,)).copy()
+    if np.any(arr <= 0) or not np.all(np.isfinite(arr)):
+        raise ValueError(f"gain must be positive and finite, got {value!r}")
+    return arr

@@ -1,0 +1,63 @@
+"""Certainty-equivalent adaptive law (paper (12)).
+
+    u_f = −K_p p − Kᵀ Z1 z + Y θ̂,      θ̂̇ = −(1/γ_θ) Yᵀ p,
+
+with Y θ = M v̇_ref + C(q, v) v_ref + g. Along solutions, with θ̃ = θ̂ − θ,
+
+    L = ½ (zᵀz + pᵀ M p + γ_θ θ̃ᵀθ̃),   L̇ = (λ_q + 1) zᵀ Z1 z − pᵀ K_p p ≤ 0,
+
+since Z1 = diag(1/x) is negative definite inside the group. −Kᵀ Z1 z grows without bound
+as a face is approached (z → −∞, 1/x → −∞), which is what makes this law keep the
+group's rows negative from any initial state with finite L.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..transform import reference_acceleration, reference_velocity, z_dot
+from .base import LawOutput, MachineLaw, diag_gain
+
+
+@dataclass
+class CertaintyEquivalentLaw(MachineLaw):
+    """(12). Gains: K_p (diagonal), λ_q, γ_θ."""
+
+    Kp: float | list[float] = 5.0
+    lam: float = 1.0
+    gamma_theta: float = 0.1
+    name: str = field(default="ce", init=False)
+
+    def state_size(self, model) -> int:
+        return 0
+
+    def initial_state(self, model, group, c, q, v, theta_hat) -> np.ndarray:
+        return np.zeros(0)
+
+    def error_signals(self, model, group, c, q, v):
+        """(p, ż, v_ref, v̇_ref) at one instant."""
+        zd = z_dot(c, group.K @ v)
+        v_ref = reference_velocity(group, c, self.lam)
+        a_ref = reference_acceleration(group, c, zd, self.lam)
+        return v - v_ref, zd, v_ref, a_ref
+
+    def evaluate(self, model, group, c, q, v, theta_hat, state) -> LawOutput:
+        p, _, v_ref, a_ref = self.error_signals(model, group, c, q, v)
+        Y = model.regressor(q, v, v_ref, a_ref)
+        kp = diag_gain(self.Kp, model.n)
+        u = -kp * p - group.K.T @ (c.z / c.x) + Y @ theta_hat
+        theta_dot = -(Y.T @ p) / self.gamma_theta
+        return LawOutput(u, theta_dot, np.zeros(0))
+
+    def lyapunov(self, model, group, c, q, v, theta_hat) -> float:
+        """L of Theorem 1 with the true θ (for analysis and tests only: the law never sees θ)."""
+        p, *_ = self.error_signals(model, group, c, q, v)
+        err = theta_hat - model.theta
+        return 0.5 * float(c.z @ c.z + p @ model.mass(q) @ p + self.gamma_theta * err @ err)
+
+    def lyapunov_rate(self, model, group, c, q, v) -> float:
+        """L̇ = (λ_q + 1) zᵀ Z1 z − pᵀ K_p p, the value the proof predicts."""
+        p, *_ = self.error_signals(model, group, c, q, v)
+        kp = diag_gain(self.Kp, model.n)
+        return float((self.lam + 1.0) * np.sum(c.z**2 / c.x) - p @ (kp * p))

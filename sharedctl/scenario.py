@@ -1,0 +1,174 @@
+"""Scenario files (TOML) → a ready-to-run closed loop. Pure: takes the parsed mapping.
+
+Keys (all SI; see docs/scenarios.md):
+  name, duration (s), dt (s)
+  [robot]    kind = "omni3" | "arm2", parameter overrides
+             (omni3: mass, body_inertia, wheel_inertia, wheel_radius, wheel_distance, delta)
+  [[region]] K = [[...], ...], T = [...]    — the feasible set is their union
+  [initial]  q, qdot
+  [desired]  kind = "line" (start, velocity) | "circle" (center, radius, omega)
+  [human]    kind = "scripted" | "spring", kp, kd
+  [sharing]  mode = "shared" | "machine" | "human", b1, b2, blend_time_constant
+  [reference] epsilon, gamma
+  [gains.ce] Kp, lam, gamma_theta   [gains.nce] lam, k_q, alpha_n, gamma_n
+  [gains.of] K1, k2, gamma_theta, sign_width   [gains.observer] Ka, Kb, sign_width
+  theta_hat0 = [...]  (default zeros, as in the paper)
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field, fields
+
+import numpy as np
+
+from .constraints import FeasibleSet, Polytope
+from .human import CircleTrajectory, JoystickSpring, LineTrajectory, ScriptedOperator
+from .models import OmniRobot, PlanarArm
+from .models.omni_robot import OmniRobotParameters
+from .models.planar_arm import PlanarArmParameters
+from .reference import ReferenceShape
+from .sets import Bands
+from .sharing import Mode, SharingParameters
+from .simulator import ClosedLoop, make_controller
+
+
+class ScenarioError(ValueError):
+    """A scenario file with a missing or bad key; the message names the key."""
+
+
+@dataclass
+class Scenario:
+    name: str
+    duration: float
+    dt: float
+    data: dict = field(repr=False)
+
+    def closed_loop(self, controller: str | None = None) -> tuple[ClosedLoop, np.ndarray, np.ndarray]:
+        """Build (loop, q0, q̇0); `controller` overrides the file's `controller` key."""
+        return build(self.data, controller)
+
+
+def _vector(data, key, n=None, where=""):
+    try:
+        arr = np.asarray(data[key], dtype=float).reshape(-1)
+    except KeyError:
+        raise ScenarioError(f"missing key {where}{key}") from None
+    except (TypeError, ValueError):
+        raise ScenarioError(f"{where}{key} must be a list of numbers") from None
+    if n is not None and arr.size != n:
+        raise ScenarioError(f"{where}{key} must have {n} entries, has {arr.size}")
+    if not np.all(np.isfinite(arr)):
+        raise ScenarioError(f"{where}{key} must be finite")
+    return arr
+
+
+def _number(data, key, default=None, where="", positive=False):
+    if key not in data:
+        if default is None:
+            raise ScenarioError(f"missing key {where}{key}")
+        return default
+    value = data[key]
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+        raise ScenarioError(f"{where}{key} must be a finite number")
+    if positive and value <= 0:
+        raise ScenarioError(f"{where}{key} must be positive")
+    return float(value)
+
+
+def _overrides(cls, table, where):
+    names = {f.name for f in fields(cls)}
+    unknown = set(table) - names - {"kind"}
+    if unknown:
+        raise ScenarioError(f"unknown key {where}{sorted(unknown)[0]} (allowed: {sorted(names)})")
+    return cls(**{k: _number(table, k, where=where) for k in table if k != "kind"})
+
+
+def parse(data: dict) -> Scenario:
+    """Validate the top level once, with errors naming the bad key."""
+    name = data.get("name", "scenario")
+    duration = _number(data, "duration", positive=True)
+    dt = _number(data, "dt", 1e-3, positive=True)
+    if dt > duration:
+        raise ScenarioError("dt must not exceed duration")
+    build(data, None)  # full validation up front
+    return Scenario(str(name), duration, dt, data)
+
+
+def build(data: dict, controller: str | None):
+    robot = data.get("robot", {})
+    kind = robot.get("kind", "omni3")
+    if kind == "omni3":
+        model = OmniRobot(_overrides(OmniRobotParameters, robot, "robot."))
+    elif kind == "arm2":
+        model = PlanarArm(_overrides(PlanarArmParameters, robot, "robot."))
+    else:
+        raise ScenarioError(f"robot.kind must be omni3 or arm2, got {kind!r}")
+    n = model.n
+
+    regions = data.get("region")
+    if not regions:
+        raise ScenarioError("missing key region (at least one [[region]] with K and T)")
+    polys = []
+    for i, reg in enumerate(regions):
+        where = f"region[{i}]."
+        try:
+            K = np.asarray(reg["K"], dtype=float)
+        except KeyError:
+            raise ScenarioError(f"missing key {where}K") from None
+        if K.ndim != 2 or K.shape[1] != n:
+            raise ScenarioError(f"{where}K must be a list of rows of {n} numbers")
+        T = _vector(reg, "T", K.shape[0], where)
+        try:
+            polys.append(Polytope.from_rows(K, T))
+        except ValueError as exc:
+            raise ScenarioError(f"{where}: {exc}") from None
+    feasible = FeasibleSet.from_regions(polys, completion_distance=_number(data, "completion_distance", 1e3))
+
+    initial = data.get("initial", {})
+    q0 = _vector(initial, "q", n, "initial.")
+    v0 = _vector(initial, "qdot", n, "initial.") if "qdot" in initial else np.zeros(n)
+
+    desired = data.get("desired", {})
+    dk = desired.get("kind", "line")
+    if dk == "line":
+        start = _vector(desired, "start", n, "desired.") if "start" in desired else q0.copy()
+        trajectory = LineTrajectory(start, _vector(desired, "velocity", n, "desired."))
+    elif dk == "circle":
+        trajectory = CircleTrajectory(
+            n, _vector(desired, "center", 2, "desired."), _number(desired, "radius", where="desired.", positive=True),
+            _number(desired, "omega", where="desired."),
+        )
+    else:
+        raise ScenarioError(f"desired.kind must be line or circle, got {dk!r}")
+
+    human = data.get("human", {})
+    kp = np.broadcast_to(_vector({"kp": human.get("kp", 20.0)}, "kp", where="human."), (n,)).copy()
+    kd = np.broadcast_to(_vector({"kd": human.get("kd", 12.0)}, "kd", where="human."), (n,)).copy()
+    hk = human.get("kind", "scripted")
+    if hk == "scripted":
+        operator = ScriptedOperator(trajectory, kp, kd)
+    elif hk == "spring":
+        operator = JoystickSpring(trajectory, kp)
+    else:
+        raise ScenarioError(f"human.kind must be scripted or spring, got {hk!r}")
+
+    sharing = data.get("sharing", {})
+    try:
+        bands = Bands(_number(sharing, "b1", 0.3, "sharing."), _number(sharing, "b2", 0.6, "sharing."))
+        mode = Mode(sharing.get("mode", "shared"))
+        ref = data.get("reference", {})
+        shape = ReferenceShape(_number(ref, "epsilon", 0.05, "reference."), _number(ref, "gamma", 40.0, "reference."))
+    except ValueError as exc:
+        raise ScenarioError(f"sharing/reference: {exc}") from None
+    params = SharingParameters(bands, _number(sharing, "blend_time_constant", 0.3, "sharing.", True), mode)
+
+    kind_ctrl = controller or data.get("controller", "ce")
+    try:
+        machine = make_controller(kind_ctrl, data.get("gains", {}))
+    except (TypeError, ValueError) as exc:
+        raise ScenarioError(f"gains/controller: {exc}") from None
+    theta0 = _vector(data, "theta_hat0", model.n_theta) if "theta_hat0" in data else np.zeros(model.n_theta)
+    loop = ClosedLoop(model, feasible, operator, machine, params, shape, theta0)
+    if not feasible.contains(q0):
+        raise ScenarioError("initial.q is outside the feasible set")
+    return loop, q0, v0

@@ -1,0 +1,110 @@
+"""Safe, hysteresis and hazardous sets (paper Definition 2).
+
+With f_b(x) = 1/(x + b) − 1/b (a speed allowance towards a face: +∞ at x = −b,
+shrinking to 0 on the face x = 0) and b2 > b1 > 0, for one row j with value x_j < 0 and
+rate ẋ_j:
+
+* the row is *unsafe* when x_j ≥ −b2 and ẋ_j > f_b2(x_j)          (it breaks O_s)
+* the row is *hazardous* when −b1 ≤ x_j < 0 and ẋ_j ≥ f_b1(x_j)   (it puts the state in O_d)
+
+A polytope's state is SAFE when none of its rows is unsafe, HAZARD when one of its rows
+is hazardous and HYSTERESIS otherwise. Because f_b2 < f_b1 on (−b1, 0), a row must cross
+the whole band between the two curves to go from safe to hazardous — the room the
+Schmitt trigger of sharing.py needs.
+
+For a union of polytopes (non-convex Q_a) the state is SAFE if it is safe with respect to
+some polytope that contains q (the robot can stay in that one), HAZARD if it is hazardous
+with respect to every polytope that contains q (it is about to leave the union), and
+HYSTERESIS otherwise. See docs/control.md §5.
+"""
+from __future__ import annotations
+
+import enum
+from dataclasses import dataclass
+
+import numpy as np
+
+from .constraints import FeasibleSet
+
+
+class SetClass(enum.IntEnum):
+    """Where the state is, from the operator's point of view."""
+
+    SAFE = 0
+    HYSTERESIS = 1
+    HAZARD = 2
+
+
+@dataclass(frozen=True)
+class Bands:
+    """b1 < b2: the widths (in constraint units, metres for unit rows) of the two bands."""
+
+    b1: float = 0.3
+    b2: float = 0.6
+
+    def __post_init__(self):
+        if not (0.0 < self.b1 < self.b2):
+            raise ValueError(f"need 0 < b1 < b2, got b1={self.b1}, b2={self.b2}")
+
+
+def allowance(x: np.ndarray, b: float) -> np.ndarray:
+    """f_b(x) = 1/(x + b) − 1/b for x > −b, +∞ for x ≤ −b (no limit that far out)."""
+    x = np.asarray(x, dtype=float)
+    out = np.full(x.shape, np.inf)
+    near = x > -b
+    out[near] = 1.0 / (x[near] + b) - 1.0 / b
+    return out
+
+
+def hazardous_rows(x: np.ndarray, x_dot: np.ndarray, bands: Bands) -> np.ndarray:
+    """Boolean per row: −b1 ≤ x < 0 and ẋ ≥ f_b1(x)."""
+    return (x >= -bands.b1) & (x < 0.0) & (x_dot >= allowance(x, bands.b1))
+
+
+def unsafe_rows(x: np.ndarray, x_dot: np.ndarray, bands: Bands) -> np.ndarray:
+    """Boolean per row: x ≥ −b2 and ẋ > f_b2(x) (rows at or past the face count as unsafe)."""
+    return (x >= -bands.b2) & (x_dot > allowance(x, bands.b2))
+
+
+def classify_rows(x: np.ndarray, x_dot: np.ndarray, bands: Bands) -> SetClass:
+    """The class of one polytope (or one group) from its rows."""
+    if np.any(hazardous_rows(x, x_dot, bands)):
+        return SetClass.HAZARD
+    if np.any(unsafe_rows(x, x_dot, bands)):
+        return SetClass.HYSTERESIS
+    return SetClass.SAFE
+
+
+@dataclass(frozen=True)
+class Situation:
+    """The classification of one state (q, v) against a feasible set."""
+
+    overall: SetClass
+    containing: tuple[int, ...]             # regions that contain q
+    region_class: dict[int, SetClass]       # class per containing region
+    hazard_rows: dict[int, tuple[int, ...]]  # hazardous row indices per containing region
+
+
+def classify(feasible: FeasibleSet, q: np.ndarray, v: np.ndarray, bands: Bands) -> Situation:
+    """Classify (q, v) against every polytope that contains q, then the union."""
+    region_class: dict[int, SetClass] = {}
+    hazard: dict[int, tuple[int, ...]] = {}
+    containing = []
+    for index, region in enumerate(feasible.regions):
+        x = region.values(q)
+        if not np.all(x < 0.0):
+            continue
+        containing.append(index)
+        x_dot = region.K @ v
+        rows = hazardous_rows(x, x_dot, bands)
+        hazard[index] = tuple(int(j) for j in np.flatnonzero(rows))
+        region_class[index] = classify_rows(x, x_dot, bands)
+    if not containing:
+        overall = SetClass.HAZARD
+    elif any(c == SetClass.SAFE for c in region_class.values()):
+        overall = SetClass.SAFE
+    elif all(c == SetClass.HAZARD for c in region_class.values()):
+        overall = SetClass.HAZARD
+    else:
+        overall = SetClass.HYSTERESIS
+    return Situation(overall, tuple(containing), region_class, hazard)

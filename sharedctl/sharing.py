@@ -1,0 +1,217 @@
+"""Authority sharing between the operator and the machine (paper (46)–(47)).
+
+The paper's sharing function k_s^i is a Schmitt trigger on the sets of Definition 2:
+0 (machine) in the hazardous set for the group of least Lyapunov value, its last value in
+the hysteresis set, 1 (human) otherwise. The printed blend lost its signs (see
+docs/control.md §6); the reading implemented here keeps the two properties the product
+must have:
+
+* **transparency** — in the safe set u_s = u_h exactly (k_s = 1);
+* **full machine authority** in the hazardous set — u_s = u_f (k_s = 0, k_f = 1).
+
+Minimum dwell. Near a face both allowance curves of Definition 2 go to zero, so the
+hysteresis band between them is thin: the machine's first push reverses the approach and
+puts the state straight back in the safe set. Read literally, (46) then hands authority
+back at once and, with an operator pushing into the face, switches at the sample rate
+(Zeno in continuous time; tests/test_sharing_hysteresis.py keeps the measurement). The
+machine therefore keeps authority for at least Δt = min_machine_dwell after taking over
+(Theorem 5 assumes such a Δt > 0). Transparency holds whenever k_s = 1, and k_s = 1 in
+the safe set except within Δt of an intervention.
+
+In the hysteresis set, k_s holds its last value. When it holds 1, the operator keeps full
+authority. When it holds 0 (the machine took over and the state has not yet reached the
+safe set), the intent measure (45) blends: u_s = k_h u_h + k_f u_f with k_f = 1 − k_h and
+k_h relaxing with time constant τ towards 1 − e^{−v_h}: an operator who pushes hard
+gets authority back progressively, one who lets go leaves the machine in charge, and the
+force has no jump when the state leaves the hazardous set. k_h is reset to 0 whenever the
+state is hazardous.
+
+Group selection: on taking over, the machine picks, among the groups of the polytopes
+that contain q, the one of least Lyapunov value that contains every hazardous row of its
+polytope (so the law it runs sees every face it is being pushed into). It keeps that group
+until the group stops applying (q left its polytope) or stops covering the hazardous rows.
+"""
+from __future__ import annotations
+
+import enum
+import math
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from .constraints import FeasibleSet
+from .sets import Bands, SetClass, Situation, classify
+
+
+class Authority(enum.IntEnum):
+    HUMAN = 0     # k_s = 1: u_s = u_h
+    SHARED = 1    # k_s = 0 held in the hysteresis set: u_s = k_h u_h + k_f u_f
+    MACHINE = 2   # k_s = 0 in the hazardous set (or machine-only mode): u_s = u_f
+
+
+class Mode(enum.Enum):
+    SHARED = "shared"     # the paper's shared controller
+    MACHINE = "machine"   # no operator: the machine laws alone (Theorems 1–4)
+    HUMAN = "human"       # no machine: the operator alone (a baseline)
+
+
+class LawRole(enum.IntEnum):
+    TRACKING = 0   # the configured law ((12), (13) or (25))
+    HAZARD = 1     # the law that runs in the hazardous set ((12) when tracking is (13))
+
+
+@dataclass(frozen=True)
+class SharingParameters:
+    bands: Bands = Bands()
+    blend_time_constant: float = 0.3      # τ (s) of k_h in the shared hysteresis state
+    mode: Mode = Mode.SHARED
+    min_machine_dwell: float = 0.25       # Δt (s): shortest machine intervention (Theorem 5's Δt > 0)
+
+    def __post_init__(self):
+        if self.blend_time_constant <= 0 or self.min_machine_dwell < 0:
+            raise ValueError("blend_time_constant must be > 0 and min_machine_dwell >= 0")
+
+
+@dataclass(frozen=True)
+class ArbiterState:
+    """The arbiter's memory: k_s (as `machine_latched`), the active group, the law role, k_h."""
+
+    machine_latched: bool = False
+    group: int | None = None
+    role: LawRole = LawRole.TRACKING
+    k_h: float = 1.0
+    machine_time: float = 0.0  # seconds since the machine last took over
+    switches: int = 0          # authority changes so far
+    group_switches: int = 0
+
+
+@dataclass(frozen=True)
+class Decision:
+    """What to apply until the next sample."""
+
+    authority: Authority
+    group: int | None
+    role: LawRole
+    k_h: float
+    k_f: float
+    situation: Situation
+    group_changed: bool
+    role_changed: bool
+
+
+def covering(feasible: FeasibleSet, situation: Situation, group: int) -> bool:
+    """Does `group` contain every hazardous row of its polytope?"""
+    grp = feasible.groups[group]
+    rows = situation.hazard_rows.get(grp.region)
+    if rows is None:
+        return False
+    return set(rows) <= set(grp.rows)
+
+
+def select_group(feasible: FeasibleSet, situation: Situation, lyapunov) -> int | None:
+    """Least-Lyapunov group among those that apply and cover their polytope's hazardous rows.
+
+    `lyapunov(g)` gives the selection value of group g. If no group covers every hazardous
+    row (a corridor narrower than the bands), the one covering most rows wins.
+    """
+    best, best_key = None, None
+    for g, grp in enumerate(feasible.groups):
+        if grp.region not in situation.region_class:
+            continue
+        rows = situation.hazard_rows[grp.region]
+        missed = len(set(rows) - set(grp.rows))
+        value = lyapunov(g)
+        if not math.isfinite(value):
+            continue
+        key = (missed, value)
+        if best_key is None or key < best_key:
+            best, best_key = g, key
+    return best
+
+
+def arbitrate(
+    feasible: FeasibleSet,
+    params: SharingParameters,
+    state: ArbiterState,
+    q: np.ndarray,
+    v: np.ndarray,
+    intent: float,
+    dt: float,
+    lyapunov,
+) -> tuple[ArbiterState, Decision]:
+    """One sample of the sharing function: classify, latch, select, blend.
+
+    `v` is the measured velocity (state feedback, (46)) or the observer's v̂ (output
+    feedback, (47)). `intent` is v_h of (45). `lyapunov(g)` is evaluated lazily.
+    """
+    situation = classify(feasible, q, v, params.bands)
+    overall = situation.overall
+    mode = params.mode
+
+    if mode is Mode.HUMAN:
+        return state, Decision(Authority.HUMAN, None, LawRole.TRACKING, 1.0, 0.0, situation, False, False)
+
+    # --- k_s: the Schmitt trigger -------------------------------------------
+    latched = state.machine_latched
+    machine_time = state.machine_time + dt if latched else 0.0
+    if mode is Mode.MACHINE:
+        latched = True
+    elif overall is SetClass.HAZARD:
+        if not latched:
+            machine_time = 0.0
+        latched = True
+    elif overall is SetClass.SAFE and machine_time >= params.min_machine_dwell:
+        latched = False
+    switches = state.switches + (latched != state.machine_latched and mode is Mode.SHARED)
+
+    # --- law role (which law the machine runs) -------------------------------
+    role = state.role
+    if overall is SetClass.HAZARD:
+        role = LawRole.HAZARD
+    elif overall is SetClass.SAFE or (mode is Mode.SHARED and latched):
+        role = LawRole.TRACKING
+    # machine-only mode in the hysteresis set: hold the role (Schmitt trigger on the law)
+
+    # --- group ------------------------------------------------------------------
+    group = state.group
+    taking_over = latched and not state.machine_latched
+    needs_group = latched or mode is Mode.MACHINE
+    if needs_group:
+        stale = (
+            group is None
+            or taking_over
+            or feasible.groups[group].region not in situation.region_class
+            or not covering(feasible, situation, group)
+            and situation.hazard_rows.get(feasible.groups[group].region)
+        )
+        if stale:
+            chosen = select_group(feasible, situation, lyapunov)
+            if chosen is not None:
+                group = chosen
+    group_changed = group != state.group
+
+    # --- weights ----------------------------------------------------------------
+    if not latched:
+        authority, k_h = Authority.HUMAN, 1.0
+    elif mode is Mode.MACHINE or overall is SetClass.HAZARD:
+        authority, k_h = Authority.MACHINE, 0.0
+    else:
+        # hysteresis set, or safe set within the minimum dwell: only reachable from the
+        # hazardous set, where k_h was reset to 0
+        target = 1.0 - math.exp(-max(intent, 0.0))
+        k_h = state.k_h + (target - state.k_h) * (1.0 - math.exp(-dt / params.blend_time_constant))
+        authority = Authority.SHARED
+    k_f = 1.0 - k_h
+
+    new_state = replace(
+        state,
+        machine_latched=latched,
+        group=group,
+        role=role,
+        k_h=k_h,
+        machine_time=machine_time if latched else 0.0,
+        switches=int(switches),
+        group_switches=state.group_switches + int(group_changed and state.group is not None),
+    )
+    decision = Decision(authority, group, role, k_h, k_f, situation, group_changed, role != state.role)
+    return new_state, decision

@@ -1,0 +1,247 @@
+"""Fixed-step, deterministic closed-loop simulation: plant + sharing + machine law + observer.
+
+The continuous state is [q, q̇, θ̂, law state, observer state]. Every step of length dt:
+
+1. the sharing function (sharing.py) samples the state and decides authority, group, law
+   role and the blend weights — a hybrid system's discrete part, held over the step;
+2. the continuous part is integrated by one classical Runge–Kutta-4 step with the law
+   evaluated at every stage (so Lyapunov identities hold to integration accuracy).
+
+When the machine takes over, or changes group or law, the law's filters restart from its
+published initial conditions ((15), (26), (28)) and the shared estimate θ̂ carries over
+(θ̂ + β when leaving (13)). θ̂ adapts only while the machine has full authority: under a
+blended or human input the adaptation laws' premises (u = u_f) do not hold.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .constraints import FeasibleSet
+from .controllers import (
+    CertaintyEquivalentLaw,
+    MachineLaw,
+    NonCertaintyEquivalentLaw,
+    OutputFeedbackLaw,
+    VelocityObserver,
+)
+from .human import HumanModel
+from .models import EulerLagrangeModel
+from .reference import ReferenceShape
+from .sharing import ArbiterState, Authority, LawRole, Mode, SharingParameters, arbitrate, select_group
+from .transform import coordinates, reference_velocity
+
+
+@dataclass
+class MachineController:
+    """The machine side: the tracking law, the law for the hazardous set, and the observer."""
+
+    tracking: MachineLaw
+    hazard: MachineLaw
+    observer: VelocityObserver | None = None
+
+    @property
+    def name(self) -> str:
+        return self.tracking.name
+
+    def law(self, role: LawRole) -> MachineLaw:
+        return self.hazard if role is LawRole.HAZARD else self.tracking
+
+
+def make_controller(kind: str, gains: dict | None = None) -> MachineController:
+    """`ce` → (12) everywhere; `nce` → (13), with (12) in the hazardous set; `of` → (25) + (40)."""
+    gains = gains or {}
+    ce = CertaintyEquivalentLaw(**gains.get("ce", {}))
+    if kind == "ce":
+        return MachineController(ce, ce)
+    if kind == "nce":
+        return MachineController(NonCertaintyEquivalentLaw(**gains.get("nce", {})), ce)
+    if kind == "of":
+        of = OutputFeedbackLaw(**gains.get("of", {}))
+        return MachineController(of, of, VelocityObserver(**gains.get("observer", {})))
+    raise ValueError(f"unknown controller {kind!r} (expected ce, nce or of)")
+
+
+@dataclass
+class ClosedLoop:
+    """Everything one simulation needs."""
+
+    model: EulerLagrangeModel
+    feasible: FeasibleSet
+    human: HumanModel
+    controller: MachineController
+    sharing: SharingParameters = field(default_factory=SharingParameters)
+    reference: ReferenceShape = field(default_factory=ReferenceShape)
+    theta_hat0: np.ndarray | None = None
+
+
+@dataclass
+class Trace:
+    """Sampled signals, one row per step (at the start of the step)."""
+
+    t: np.ndarray
+    q: np.ndarray
+    v: np.ndarray
+    v_hat: np.ndarray
+    q_d: np.ndarray
+    q_r: np.ndarray
+    u_h: np.ndarray
+    u_f: np.ndarray
+    u_s: np.ndarray
+    tau: np.ndarray
+    theta_hat: np.ndarray
+    authority: np.ndarray
+    set_class: np.ndarray
+    group: np.ndarray
+    role: np.ndarray
+    k_h: np.ndarray
+    k_f: np.ndarray
+    intent: np.ndarray
+    margin: np.ndarray
+    inside: np.ndarray
+    finite: bool
+    switches: int
+    group_switches: int
+
+
+class _Recorder:
+    def __init__(self, steps, n, n_theta):
+        z = lambda *s: np.full((steps,) + s, np.nan)
+        self.cols = {k: z(n) for k in ("q", "v", "v_hat", "q_d", "q_r", "u_h", "u_f", "u_s", "tau")}
+        self.cols["theta_hat"] = z(n_theta)
+        for k in ("t", "k_h", "k_f", "intent", "margin"):
+            self.cols[k] = z()
+        for k in ("authority", "set_class", "group", "role"):
+            self.cols[k] = np.full(steps, -1, dtype=int)
+        self.cols["inside"] = np.zeros(steps, dtype=bool)
+
+    def put(self, k, **values):
+        for name, value in values.items():
+            self.cols[name][k] = value
+
+    def trace(self, steps, finite, switches, group_switches) -> Trace:
+        cols = {name: arr[:steps] for name, arr in self.cols.items()}
+        return Trace(**cols, finite=finite, switches=switches, group_switches=group_switches)
+
+
+def simulate(loop: ClosedLoop, q0, v0, duration: float, dt: float) -> Trace:
+    """Run the closed loop from (q0, q̇0) for `duration` seconds with step `dt`."""
+    model, feasible, human, ctrl = loop.model, loop.feasible, loop.human, loop.controller
+    n, n_theta = model.n, model.n_theta
+    steps = int(round(duration / dt))
+    q = np.asarray(q0, dtype=float).copy()
+    v = np.asarray(v0, dtype=float).copy()
+    theta_hat = np.zeros(n_theta) if loop.theta_hat0 is None else np.asarray(loop.theta_hat0, float).copy()
+    observer = ctrl.observer
+    obs = observer.initial_state(q, v) if observer else np.zeros(0)
+    arbiter = ArbiterState(machine_latched=loop.sharing.mode is Mode.MACHINE, k_h=0.0 if loop.sharing.mode is Mode.MACHINE else 1.0)
+    law: MachineLaw | None = None
+    law_state = np.zeros(0)
+    engaged_before = False
+    rec = _Recorder(steps, n, n_theta)
+    finite = True
+    is_omni = hasattr(model, "wheel_torques")
+
+    def velocity_for_control(q_, v_, obs_):
+        return observer.velocity(q_, obs_) if observer else v_
+
+    def selection_value(q_, v_meas, desired, lam):
+        def value(g):
+            grp = feasible.groups[g]
+            c = coordinates(grp, q_, v_meas, desired, loop.reference)
+            if not c.inside:
+                return np.inf
+            p = v_meas - reference_velocity(grp, c, lam)
+            return 0.5 * float(c.z @ c.z + p @ p)
+        return value
+
+    def rates(t, q_, v_, th_, s_, o_, decision, want_signals=False):
+        desired = human.desired(t)
+        v_meas = velocity_for_control(q_, v_, o_)
+        u_h = np.zeros(n)
+        if loop.sharing.mode is not Mode.MACHINE:
+            u_h = human.command(t, q_, v_).force
+        u_f = np.zeros(n)
+        th_dot, s_dot = np.zeros(n_theta), np.zeros_like(s_)
+        if decision.authority is not Authority.HUMAN and decision.group is not None:
+            grp = feasible.groups[decision.group]
+            c = coordinates(grp, q_, v_meas, desired, loop.reference)
+            out = law.evaluate(model, grp, c, q_, v_meas, th_, s_)
+            u_f, s_dot = out.u, out.state_dot
+            if decision.authority is Authority.MACHINE:
+                th_dot = out.theta_dot
+        if decision.authority is Authority.HUMAN:
+            u_s = u_h
+        elif decision.authority is Authority.MACHINE:
+            u_s = u_f
+        else:
+            u_s = decision.k_h * u_h + decision.k_f * u_f
+        acc = model.acceleration(q_, v_, u_s)
+        o_dot = observer.derivative(q_, o_) if observer else np.zeros(0)
+        derivs = (v_, acc, th_dot, s_dot, o_dot)
+        if want_signals:
+            return derivs, (u_h, u_f, u_s, v_meas, desired)
+        return derivs
+
+    k = 0
+    for k in range(steps):
+        t = k * dt
+        desired = human.desired(t)
+        v_meas = velocity_for_control(q, v, obs)
+        intent = 0.0 if loop.sharing.mode is Mode.MACHINE else human.command(t, q, v).intent
+        lam = ctrl.tracking.lam
+        arbiter_prev = arbiter
+        arbiter, decision = arbitrate(
+            feasible, loop.sharing, arbiter, q, v_meas, intent, dt, selection_value(q, v_meas, desired, lam)
+        )
+        engaged = decision.authority is not Authority.HUMAN and decision.group is not None
+        if engaged and (not engaged_before or decision.group_changed or decision.role_changed or law is None):
+            if law is not None and law_state.size:
+                theta_hat = law.estimate(theta_hat, law_state)
+            law = ctrl.law(decision.role)
+            grp = feasible.groups[decision.group]
+            c = coordinates(grp, q, v_meas, desired, loop.reference)
+            law_state = law.initial_state(model, grp, c, q, v_meas, theta_hat)
+        elif not engaged and engaged_before and law is not None and law_state.size:
+            theta_hat = law.estimate(theta_hat, law_state)
+            law_state = np.zeros(0)
+        engaged_before = engaged
+        del arbiter_prev
+
+        (d1, signals) = rates(t, q, v, theta_hat, law_state, obs, decision, want_signals=True)
+        u_h, u_f, u_s, v_meas, desired = signals
+        ref_group = decision.group if engaged else select_group(
+            feasible, decision.situation, selection_value(q, v_meas, desired, lam)
+        )
+        q_r = np.full(n, np.nan)
+        if ref_group is not None:
+            q_r = coordinates(feasible.groups[ref_group], q, v_meas, desired, loop.reference).q_r
+        estimate = law.estimate(theta_hat, law_state) if (law is not None and law_state.size) else theta_hat
+        rec.put(
+            k, t=t, q=q, v=v, v_hat=v_meas, q_d=desired.q, q_r=q_r, u_h=u_h, u_f=u_f, u_s=u_s,
+            tau=model.wheel_torques(q, u_s) if is_omni else u_s,
+            theta_hat=estimate, authority=int(decision.authority), set_class=int(decision.situation.overall),
+            group=-1 if decision.group is None else decision.group, role=int(decision.role),
+            k_h=decision.k_h, k_f=decision.k_f, intent=intent, margin=feasible.margin(q),
+            inside=feasible.contains(q),
+        )
+
+        state = (q, v, theta_hat, law_state, obs)
+        d2 = rates(t + dt / 2, *_axpy(state, d1, dt / 2), decision)
+        d3 = rates(t + dt / 2, *_axpy(state, d2, dt / 2), decision)
+        d4 = rates(t + dt, *_axpy(state, d3, dt), decision)
+        q, v, theta_hat, law_state, obs = (
+            s + (dt / 6.0) * (a + 2.0 * b + 2.0 * c + d) for s, a, b, c, d in zip(state, d1, d2, d3, d4)
+        )
+        if not all(np.all(np.isfinite(x)) for x in (q, v, theta_hat, law_state, obs)):
+            finite = False
+            k += 1
+            break
+    else:
+        k = steps
+    return rec.trace(k, finite, arbiter.switches, arbiter.group_switches)
+
+
+def _axpy(state, rate, h):
+    return tuple(s + h * r for s, r in zip(state, rate))
