@@ -70,7 +70,9 @@ def real(low: float = -math.inf, high: float = math.inf) -> Check:
                 raise WrongType(f"{what} must be a number")
             try:
                 value = float(value)
-            except (OverflowError, TypeError, ValueError):
+            except OverflowError:
+                raise OutOfRange(f"{what} exceeds the float range") from None
+            except (TypeError, ValueError):
                 raise WrongType(f"{what} must be a number") from None
         if not math.isfinite(value):
             raise NonFiniteValue(f"{what} is not finite")

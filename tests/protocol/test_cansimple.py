@@ -270,6 +270,11 @@ def test_setpoint_beyond_float32_range_is_out_of_range():
         cs.SetInputTorque(0, 1e39)
 
 
+def test_integer_setpoint_beyond_float_range_is_out_of_range():
+    with pytest.raises(OutOfRange):
+        cs.SetInputTorque(0, 10**400)
+
+
 def test_negative_velocity_limit_is_out_of_range():
     with pytest.raises(OutOfRange):
         cs.SetLimits(0, -1.0, 10.0)
