@@ -66,18 +66,21 @@ def _finite_everywhere(value: Any) -> bool:
     return True
 
 
-def _valid_can(decoded: Any) -> bool:
+def is_valid_can_output(decoded: Any) -> bool:
+    """A decoded CAN value is a known frame type with a node in 0..63 and only finite floats."""
     return (type(decoded) in (*cs.FRAME_SPECS, cs.PollRequest)
             and 0 <= decoded.node_id <= 63 and _finite_everywhere(decoded))
 
 
-def _valid_message(decoded: Any) -> bool:
+def is_valid_message_output(decoded: Any) -> bool:
+    """A decoded message is a known type, finite everywhere, with the project's array lengths."""
     if type(decoded) not in MESSAGE_TYPES or not _finite_everywhere(decoded):
         return False
     return all(length == getattr(ROBOT_DIMS, dim) for dim, length in shape_of(decoded).items())
 
 
-def _valid_key(decoded: Any) -> bool:
+def is_valid_key_output(decoded: Any) -> bool:
+    """A parsed key names a known kind and a robot id without separators."""
     return isinstance(decoded, ParsedKey) and decoded.kind in KINDS and "/" not in decoded.robot
 
 
@@ -279,8 +282,9 @@ def key_inputs(rng: random.Random, count: int) -> Iterator[str]:
         yield "".join(chars) if rng.random() < 0.9 else "".join(rng.choice(alphabet) for _ in range(rng.randint(0, 40)))
 
 
-def _campaign(name: str, inputs: Iterator[Any], decode: Callable[[Any], Any],
-              valid: Callable[[Any], bool], report: FuzzReport) -> FuzzReport:
+def fuzz_inputs(name: str, inputs: Iterator[Any], decode: Callable[[Any], Any],
+                valid: Callable[[Any], bool], report: FuzzReport) -> FuzzReport:
+    """Feed ``inputs`` to ``decode``; count typed errors, valid results and escapes into ``report``."""
     for item in inputs:
         report.inputs += 1
         try:
@@ -308,11 +312,11 @@ def run_campaign(decoder: str, count: int, seed: int = 0) -> FuzzReport:
     rng = random.Random(f"{decoder}:{seed}")
     report = FuzzReport(decoder)
     if decoder == "can":
-        return _campaign(decoder, can_inputs(rng, count),
-                         lambda f: cs.decode(f[0], f[1], f[2], dlc=f[3]), _valid_can, report)
+        return fuzz_inputs(decoder, can_inputs(rng, count),
+                           lambda f: cs.decode(f[0], f[1], f[2], dlc=f[3]), is_valid_can_output, report)
     if decoder == "message":
-        return _campaign(decoder, message_inputs(rng, count), decode_message, _valid_message, report)
+        return fuzz_inputs(decoder, message_inputs(rng, count), decode_message, is_valid_message_output, report)
     if decoder == "key":
-        return _campaign(decoder, key_inputs(rng, count), parse_key, _valid_key, report)
+        return fuzz_inputs(decoder, key_inputs(rng, count), parse_key, is_valid_key_output, report)
     raise ValueError(f"unknown decoder {decoder!r}; choose from {', '.join(DECODERS)}")
 

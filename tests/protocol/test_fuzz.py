@@ -44,12 +44,12 @@ def test_campaign_counts_a_foreign_exception_as_an_escape():
     def broken(_):
         raise KeyError("not a protocol error")
 
-    report = fuzz._campaign("x", iter(range(3)), broken, lambda _: True, fuzz.FuzzReport("x"))
+    report = fuzz.fuzz_inputs("x", iter(range(3)), broken, lambda _: True, fuzz.FuzzReport("x"))
     assert report.escapes == 3
 
 
 def test_campaign_counts_an_invalid_accepted_value_as_an_escape():
-    report = fuzz._campaign("x", iter([math.nan]), lambda v: v, lambda v: not math.isnan(v), fuzz.FuzzReport("x"))
+    report = fuzz.fuzz_inputs("x", iter([math.nan]), lambda v: v, lambda v: not math.isnan(v), fuzz.FuzzReport("x"))
     assert report.escapes == 1
 
 
@@ -70,7 +70,7 @@ def _decodes_or_typed_error(payload: bytes) -> bool:
         decoded = decode_message(payload)
     except ProtocolError:
         return True
-    return fuzz._valid_message(decoded)
+    return fuzz.is_valid_message_output(decoded)
 
 
 @settings(suppress_health_check=[HealthCheck.too_slow])
@@ -115,7 +115,7 @@ def _frame_decodes_or_typed_error(arb, data, is_remote, dlc) -> bool:
         decoded = cs.decode(arb, data, is_remote, dlc=dlc)
     except ProtocolError:
         return True
-    return fuzz._valid_can(decoded)
+    return fuzz.is_valid_can_output(decoded)
 
 
 @given(st.integers(0, 0x7FF), st.binary(max_size=8), st.booleans(), st.integers(0, 8))
@@ -140,4 +140,4 @@ def test_any_text_parses_as_a_key_or_raises_typed_error(text):
         parsed = parse_key(text)
     except ProtocolError:
         parsed = None
-    assert parsed is None or fuzz._valid_key(parsed)
+    assert parsed is None or fuzz.is_valid_key_output(parsed)
