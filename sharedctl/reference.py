@@ -7,8 +7,8 @@ We use the softplus saturation
 
     x_r(m) = −ε − (1/γ) ln(1 + exp(−γ (m + ε))),
 
-which is C^∞, satisfies x_r < −ε for every m, x_r → m as m → −∞ and x_r → −ε as m → +∞
-(q_d on or beyond the face). Its derivatives are σ'(m) = s and σ''(m) = γ s (1 − s)
+which is C^∞, satisfies x_r < −ε for every m (≤ in floating point far outside), x_r → m as m → −∞ and x_r → −ε as m → +∞
+(q_d on or beyond the face). Its derivatives are σ′(m) = s and σ″(m) = −γ s (1 − s)
 with s = 1/(1 + exp(γ (m + ε))), so ẋ_r = σ' ṁ and ẍ_r = σ'' ṁ² + σ' m̈ with
 ṁ = k_j q̇_d and m̈ = k_j q̈_d. See docs/control.md §3.
 """
@@ -39,7 +39,7 @@ def saturate(m: np.ndarray, shape: ReferenceShape) -> tuple[np.ndarray, np.ndarr
     softplus = np.where(u > 30.0, u, np.log1p(np.exp(np.minimum(u, 30.0))))
     x_r = -eps - softplus / g
     s = 0.5 * (1.0 + np.tanh(0.5 * u))   # = 1/(1+e^{-u}) = 1/(1+exp(γ(m+ε)))
-    return x_r, s, g * s * (1.0 - s)
+    return x_r, s, -g * s * (1.0 - s)
 
 
 def projected_reference(

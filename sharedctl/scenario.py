@@ -164,7 +164,7 @@ def build(data: dict, controller: str | None):
 
     kind_ctrl = controller or data.get("controller", "ce")
     try:
-        machine = make_controller(kind_ctrl, data.get("gains", {}))
+        machine = make_controller(kind_ctrl, data.get("gains", {}), model)
     except (TypeError, ValueError) as exc:
         raise ScenarioError(f"gains/controller: {exc}") from None
     theta0 = _vector(data, "theta_hat0", model.n_theta) if "theta_hat0" in data else np.zeros(model.n_theta)

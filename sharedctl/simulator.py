@@ -49,9 +49,16 @@ class MachineController:
         return self.hazard if role is LawRole.HAZARD else self.tracking
 
 
-def make_controller(kind: str, gains: dict | None = None) -> MachineController:
-    """`ce` → (12) everywhere; `nce` → (13), with (12) in the hazardous set; `of` → (25) + (40)."""
-    gains = gains or {}
+def make_controller(kind: str, gains: dict | None = None, model: EulerLagrangeModel | None = None) -> MachineController:
+    """`ce` → (12) everywhere; `nce` → (13), with (12) in the hazardous set; `of` → (25) + (40).
+
+    `gains` maps a law ("ce", "nce", "of", "observer") to keyword overrides; they are laid
+    over the model's `default_gains` (gains scale with the plant's inertia).
+    """
+    merged = {k: dict(v) for k, v in getattr(model, "default_gains", {}).items()}
+    for law, table in (gains or {}).items():
+        merged.setdefault(law, {}).update(table)
+    gains = merged
     ce = CertaintyEquivalentLaw(**gains.get("ce", {}))
     if kind == "ce":
         return MachineController(ce, ce)

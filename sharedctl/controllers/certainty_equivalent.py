@@ -24,9 +24,9 @@ from .base import LawOutput, MachineLaw, diag_gain
 class CertaintyEquivalentLaw(MachineLaw):
     """(12). Gains: K_p (diagonal), λ_q, γ_θ."""
 
-    Kp: float | list[float] = 5.0
-    lam: float = 1.0
-    gamma_theta: float = 0.1
+    Kp: float | list[float] = 40.0
+    lam: float = 1.5
+    gamma_theta: float = 0.5
     name: str = field(default="ce", init=False)
 
     def state_size(self, model) -> int:

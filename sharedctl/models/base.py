@@ -25,6 +25,8 @@ class EulerLagrangeModel(ABC):
     coordinate_names: tuple[str, ...]
     #: names of the parameters
     parameter_names: tuple[str, ...]
+    #: recommended machine-law gains for this plant's inertia scale, per law name
+    default_gains: dict = {}
 
     @property
     @abstractmethod

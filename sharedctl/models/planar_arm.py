@@ -56,6 +56,8 @@ class PlanarArm(EulerLagrangeModel):
     n_theta = 5
     coordinate_names = ("q1", "q2")
     parameter_names = ("theta1", "theta2", "theta3", "theta4", "theta5")
+    # link inertias are ~0.1 kg m²: the omnidirectional robot's gains would be stiff here
+    default_gains = {"ce": {"Kp": 5.0, "lam": 1.5, "gamma_theta": 0.5}}
 
     @property
     def theta(self) -> np.ndarray:
