@@ -74,12 +74,26 @@ class ConstraintGroup:
 
 
 @dataclass(frozen=True)
+class GroupStack:
+    """All groups' matrices stacked, for evaluating every group at once."""
+
+    K: np.ndarray       # G×n×n
+    T: np.ndarray       # G×n
+    K_inv: np.ndarray   # G×n×n
+
+    @staticmethod
+    def of(groups) -> "GroupStack":
+        return GroupStack(np.stack([g.K for g in groups]), np.stack([g.T for g in groups]), np.stack([g.K_inv for g in groups]))
+
+
+@dataclass(frozen=True)
 class FeasibleSet:
     """A union of polytopes Q_a = ∪_r {K_r q + T_r ≤ 0}, with its constraint groups."""
 
     regions: tuple[Polytope, ...]
     groups: tuple[ConstraintGroup, ...]
     completion_distance: float
+    stack: GroupStack
 
     @staticmethod
     def from_regions(regions, completion_distance: float = 1.0e3, max_condition: float = 1.0e6) -> "FeasibleSet":
@@ -96,7 +110,7 @@ class FeasibleSet:
             if not found:
                 raise ConstraintError(f"region {index} has no invertible group of {n} rows")
             groups.extend(found)
-        return FeasibleSet(polys, tuple(groups), completion_distance)
+        return FeasibleSet(polys, tuple(groups), completion_distance, GroupStack.of(groups))
 
     @property
     def n(self) -> int:

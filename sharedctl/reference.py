@@ -35,10 +35,8 @@ def saturate(m: np.ndarray, shape: ReferenceShape) -> tuple[np.ndarray, np.ndarr
     """x_r = σ(m), σ'(m), σ''(m), elementwise and overflow-free."""
     eps, g = shape.epsilon, shape.gamma
     u = -g * (m + eps)
-    # ln(1 + e^u) computed stably
-    softplus = np.where(u > 30.0, u, np.log1p(np.exp(np.minimum(u, 30.0))))
-    x_r = -eps - softplus / g
-    s = 0.5 * (1.0 + np.tanh(0.5 * u))   # = 1/(1+e^{-u}) = 1/(1+exp(γ(m+ε)))
+    x_r = -eps - np.logaddexp(0.0, u) / g      # ln(1 + e^u), overflow-free
+    s = 0.5 + 0.5 * np.tanh(0.5 * u)           # = 1/(1+e^{-u}) = 1/(1+exp(γ(m+ε)))
     return x_r, s, -g * s * (1.0 - s)
 
 

@@ -108,6 +108,13 @@ def covering(feasible: FeasibleSet, situation: Situation, group: int) -> bool:
     return set(rows) <= set(grp.rows)
 
 
+def _clear_of_faces(feasible: FeasibleSet, group: int | None, q: np.ndarray, bands: Bands) -> bool:
+    """Every row of the group at least b1 inside its face (x_j ≤ −b1)."""
+    if group is None:
+        return True
+    return bool(np.all(feasible.groups[group].values(q) <= -bands.b1))
+
+
 def select_group(feasible: FeasibleSet, situation: Situation, lyapunov) -> int | None:
     """Least-Lyapunov group among those that apply and cover their polytope's hazardous rows.
 
@@ -168,9 +175,12 @@ def arbitrate(
     role = state.role
     if overall is SetClass.HAZARD:
         role = LawRole.HAZARD
-    elif overall is SetClass.SAFE or (mode is Mode.SHARED and latched):
+    elif role is LawRole.HAZARD and overall is SetClass.SAFE and _clear_of_faces(feasible, state.group, q, params.bands):
         role = LawRole.TRACKING
-    # machine-only mode in the hysteresis set: hold the role (Schmitt trigger on the law)
+    # otherwise hold the role: the hazard law keeps running until the state is safe *and*
+    # outside the inner band of its group (a law-level Schmitt trigger). The tracking law
+    # (13) has no barrier and its gains grow like 1/x² near a face, so it only resumes
+    # where it is well-conditioned.
 
     # --- group ------------------------------------------------------------------
     group = state.group

@@ -30,7 +30,7 @@ from .human import HumanModel
 from .models import EulerLagrangeModel
 from .reference import ReferenceShape
 from .sharing import ArbiterState, Authority, LawRole, Mode, SharingParameters, arbitrate, select_group
-from .transform import coordinates, reference_velocity
+from .transform import all_groups, coordinates
 
 
 @dataclass
@@ -153,15 +153,6 @@ def simulate(loop: ClosedLoop, q0, v0, duration: float, dt: float) -> Trace:
     def velocity_for_control(q_, v_, obs_):
         return observer.velocity(q_, obs_) if observer else v_
 
-    def selection_value(q_, v_meas, desired, lam):
-        def value(g):
-            grp = feasible.groups[g]
-            c = coordinates(grp, q_, v_meas, desired, loop.reference)
-            if not c.inside:
-                return np.inf
-            p = v_meas - reference_velocity(grp, c, lam)
-            return 0.5 * float(c.z @ c.z + p @ p)
-        return value
 
     def rates(t, q_, v_, th_, s_, o_, decision, want_signals=False):
         desired = human.desired(t)
@@ -174,6 +165,8 @@ def simulate(loop: ClosedLoop, q0, v0, duration: float, dt: float) -> Trace:
         if decision.authority is not Authority.HUMAN and decision.group is not None:
             grp = feasible.groups[decision.group]
             c = coordinates(grp, q_, v_meas, desired, loop.reference)
+            if not c.inside:
+                raise _Escaped(q_, v_)
             out = law.evaluate(model, grp, c, q_, v_meas, th_, s_)
             u_f, s_dot = out.u, out.state_dot
             if decision.authority is Authority.MACHINE:
@@ -197,11 +190,8 @@ def simulate(loop: ClosedLoop, q0, v0, duration: float, dt: float) -> Trace:
         desired = human.desired(t)
         v_meas = velocity_for_control(q, v, obs)
         intent = 0.0 if loop.sharing.mode is Mode.MACHINE else human.command(t, q, v).intent
-        lam = ctrl.tracking.lam
-        arbiter_prev = arbiter
-        arbiter, decision = arbitrate(
-            feasible, loop.sharing, arbiter, q, v_meas, intent, dt, selection_value(q, v_meas, desired, lam)
-        )
+        q_r_all, values = all_groups(feasible.stack, q, v_meas, desired, loop.reference, ctrl.tracking.lam)
+        arbiter, decision = arbitrate(feasible, loop.sharing, arbiter, q, v_meas, intent, dt, values.__getitem__)
         engaged = decision.authority is not Authority.HUMAN and decision.group is not None
         if engaged and (not engaged_before or decision.group_changed or decision.role_changed or law is None):
             if law is not None and law_state.size:
@@ -214,16 +204,16 @@ def simulate(loop: ClosedLoop, q0, v0, duration: float, dt: float) -> Trace:
             theta_hat = law.estimate(theta_hat, law_state)
             law_state = np.zeros(0)
         engaged_before = engaged
-        del arbiter_prev
 
-        (d1, signals) = rates(t, q, v, theta_hat, law_state, obs, decision, want_signals=True)
+        try:
+            (d1, signals) = rates(t, q, v, theta_hat, law_state, obs, decision, want_signals=True)
+        except _Escaped:
+            rec.put(k, t=t, q=q, v=v, margin=feasible.margin(q), inside=feasible.contains(q))
+            k += 1
+            break
         u_h, u_f, u_s, v_meas, desired = signals
-        ref_group = decision.group if engaged else select_group(
-            feasible, decision.situation, selection_value(q, v_meas, desired, lam)
-        )
-        q_r = np.full(n, np.nan)
-        if ref_group is not None:
-            q_r = coordinates(feasible.groups[ref_group], q, v_meas, desired, loop.reference).q_r
+        ref_group = decision.group if engaged else select_group(feasible, decision.situation, values.__getitem__)
+        q_r = q_r_all[ref_group] if ref_group is not None else np.full(n, np.nan)
         estimate = law.estimate(theta_hat, law_state) if (law is not None and law_state.size) else theta_hat
         rec.put(
             k, t=t, q=q, v=v, v_hat=v_meas, q_d=desired.q, q_r=q_r, u_h=u_h, u_f=u_f, u_s=u_s,
@@ -235,9 +225,19 @@ def simulate(loop: ClosedLoop, q0, v0, duration: float, dt: float) -> Trace:
         )
 
         state = (q, v, theta_hat, law_state, obs)
-        d2 = rates(t + dt / 2, *_axpy(state, d1, dt / 2), decision)
-        d3 = rates(t + dt / 2, *_axpy(state, d2, dt / 2), decision)
-        d4 = rates(t + dt, *_axpy(state, d3, dt), decision)
+        try:
+            d2 = rates(t + dt / 2, *_axpy(state, d1, dt / 2), decision)
+            d3 = rates(t + dt / 2, *_axpy(state, d2, dt / 2), decision)
+            d4 = rates(t + dt, *_axpy(state, d3, dt), decision)
+        except _Escaped as escape:
+            # an integration stage left the active group's polytope: the law has no value
+            # there (z = ln(x/x_r) needs x < 0). Record that state as the last sample.
+            if k + 1 < steps:
+                rec.put(k + 1, t=t + dt, q=escape.q, v=escape.v, margin=feasible.margin(escape.q),
+                        inside=feasible.contains(escape.q))
+                k += 1
+            k += 1
+            break
         q, v, theta_hat, law_state, obs = (
             s + (dt / 6.0) * (a + 2.0 * b + 2.0 * c + d) for s, a, b, c, d in zip(state, d1, d2, d3, d4)
         )
@@ -248,6 +248,12 @@ def simulate(loop: ClosedLoop, q0, v0, duration: float, dt: float) -> Trace:
     else:
         k = steps
     return rec.trace(k, finite, arbiter.switches, arbiter.group_switches)
+
+
+class _Escaped(Exception):
+    def __init__(self, q, v):
+        super().__init__("state left the active group")
+        self.q, self.v = q, v
 
 
 def _axpy(state, rate, h):

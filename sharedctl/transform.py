@@ -23,8 +23,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .constraints import ConstraintGroup
-from .reference import ReferenceShape, projected_reference
+from .constraints import ConstraintGroup, GroupStack
+from .reference import ReferenceShape, projected_reference, saturate
 
 
 @dataclass(frozen=True)
@@ -81,3 +81,24 @@ def reference_acceleration(group: ConstraintGroup, c: GroupCoordinates, zd: np.n
     """v̇_ref = K⁻¹[(1+λ) ż + e^z ∘ ż ∘ ẋ_r + e^z ∘ ẍ_r]."""
     ez = np.exp(c.z)
     return group.K_inv @ ((1.0 + lam) * zd + ez * zd * c.x_r_dot + ez * c.x_r_ddot)
+
+
+def all_groups(stack: GroupStack, q: np.ndarray, v: np.ndarray, desired: Desired, shape: ReferenceShape, lam: float):
+    """Every group at once: (q_r G×n, selection value G) with value = ½(|z|² + |p|²), +∞ where x ≥ 0.
+
+    The selection value is the measurable part of each law's Lyapunov function with unit
+    inertia (the true M is unknown to the machine); sharing.py picks its least.
+    """
+    x = stack.K @ q + stack.T
+    m = stack.K @ desired.q + stack.T
+    x_r, d1, _ = saturate(m, shape)
+    x_r_dot = d1 * (stack.K @ desired.q_dot)
+    inside = np.all(x < 0.0, axis=1)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        z = np.log(x / x_r)
+    v_ref = np.einsum("gij,gj->gi", stack.K_inv, (1.0 + lam) * z + np.exp(z) * x_r_dot)
+    p = v - v_ref
+    value = 0.5 * (np.sum(z * z, axis=1) + np.sum(p * p, axis=1))
+    value[~inside] = np.inf
+    q_r = np.einsum("gij,gj->gi", stack.K_inv, x_r - stack.T)
+    return q_r, value

@@ -30,9 +30,9 @@ from .base import LawOutput, MachineLaw
 class NonCertaintyEquivalentLaw(MachineLaw):
     """(13)–(15). Gains: λ_q, k_q, α_n, γ_n (paper: γ_n ≥ 1/k_q)."""
 
-    lam: float = 1.0
-    k_q: float = 2.0
-    alpha_n: float = 10.0
+    lam: float = 1.5
+    k_q: float = 1.0
+    alpha_n: float = 3.0
     gamma_n: float = 200.0
     name: str = field(default="nce", init=False)
 
