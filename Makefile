@@ -16,7 +16,8 @@ $(STAMP): pyproject.toml requirements.lock
 	touch $(STAMP)
 
 demo: $(STAMP)
-	$(BIN)/sharedctl demo
+	mkdir -p out
+	$(BIN)/sharedctl sim paper_convex --json out/demo.json --plot out/demo.png
 
 test: $(STAMP)
 	$(BIN)/python -m pytest

@@ -141,7 +141,7 @@ def simulate(loop: ClosedLoop, q0, v0, duration: float, dt: float) -> Trace:
     v = np.asarray(v0, dtype=float).copy()
     theta_hat = np.zeros(n_theta) if loop.theta_hat0 is None else np.asarray(loop.theta_hat0, float).copy()
     observer = ctrl.observer
-    obs = observer.initial_state(q, v) if observer else np.zeros(0)
+    obs = observer.initial_state(q) if observer else np.zeros(0)   # v̂(0) = 0: the true q̇(0) is not measured
     arbiter = ArbiterState(machine_latched=loop.sharing.mode is Mode.MACHINE, k_h=0.0 if loop.sharing.mode is Mode.MACHINE else 1.0)
     law: MachineLaw | None = None
     law_state = np.zeros(0)

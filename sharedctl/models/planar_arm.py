@@ -57,7 +57,11 @@ class PlanarArm(EulerLagrangeModel):
     coordinate_names = ("q1", "q2")
     parameter_names = ("theta1", "theta2", "theta3", "theta4", "theta5")
     # link inertias are ~0.1 kg m²: the omnidirectional robot's gains would be stiff here
-    default_gains = {"ce": {"Kp": 5.0, "lam": 1.5, "gamma_theta": 0.5}}
+    default_gains = {
+        "ce": {"Kp": 5.0, "lam": 1.5, "gamma_theta": 0.5},
+        "nce": {"gamma_n": 20.0},
+        "of": {"stiffness": 3.0},
+    }
 
     @property
     def theta(self) -> np.ndarray:
