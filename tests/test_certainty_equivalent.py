@@ -46,7 +46,9 @@ def test_group_stays_feasible_when_started_at_speed_towards_the_wall(speed):
     trace = simulate(loop, np.array([-0.5, 3.5, 0.0]), np.array([0.0, speed, 0.0]), 3.0, 5e-4)
     assert trace.finite
     assert trace.inside.all()
-    assert trace.margin.min() > 0.0
+    # the margin Theorem 1 implies: every row stays ε·exp(−√(2 L(0))) inside its face
+    L0 = lyapunov_along(loop, trace)[0][0]
+    assert trace.margin.min() >= loop.reference.epsilon * np.exp(-np.sqrt(2 * L0))
 
 
 def test_tracks_the_wish_when_it_stays_well_inside():
