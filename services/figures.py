@@ -201,8 +201,9 @@ def draw_path_by_authority(ax, trace, lw: float = 2.0, small: bool = False) -> l
 
 
 def _start_end(ax, trace, colour="k") -> list:
-    ax.plot(*trace.q[0, :2], "o", color=colour, mfc="white", ms=9, mew=2, zorder=7)
-    ax.plot(*trace.q[-1, :2], "s", color=colour, ms=8, zorder=7)
+    finite = trace.q[np.all(np.isfinite(trace.q), axis=1)]
+    ax.plot(*finite[0, :2], "o", color=colour, mfc="white", ms=9, mew=2, zorder=7)
+    ax.plot(*finite[-1, :2], "s", color=colour, ms=8, zorder=7)
     return [Line2D([], [], marker="o", color="k", mfc="white", ls="none", mew=2, label="start"),
             Line2D([], [], marker="s", color="k", ls="none", label="end")]
 
@@ -451,6 +452,9 @@ def comparison_figure(runs: Sequence[Run], title: str) -> Figure:
             draw_direction_arrows(ax, r.trace.q[:, :2], colour, count=6, size=18)
             handles.append(Line2D([], [], color=colour, lw=2, label=f"{r.controller}: {CONTROLLERS[r.controller][2]}"))
         handles += _start_end(ax, runs[0].trace)
+        for r in runs:   # each run's own end (a run that diverged stops early)
+            end = r.trace.q[np.all(np.isfinite(r.trace.q), axis=1)][-1, :2]
+            ax.plot(*end, "s", color=CONTROLLERS[r.controller][0], mec="k", ms=9, zorder=8)
         _plane_axes(ax, loop, "All controllers (arrows: direction of travel)")
         authority = []
         for k, r in enumerate(runs[:3]):
