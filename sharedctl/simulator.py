@@ -50,7 +50,8 @@ class MachineController:
 
 
 def make_controller(kind: str, gains: dict | None = None, model: EulerLagrangeModel | None = None) -> MachineController:
-    """`ce` → (12) everywhere; `nce` → (13), with (12) in the hazardous set; `of` → (25) + (40).
+    """`ce` → (12) everywhere; `nce` → (13), with (12) in the hazardous set; `of` → (25) with the
+    observer (40), and (12) on the observer's v̂ in the hazardous set (docs/control.md §4.3).
 
     `gains` maps a law ("ce", "nce", "of", "observer") to keyword overrides; they are laid
     over the model's `default_gains` (gains scale with the plant's inertia).
@@ -66,7 +67,7 @@ def make_controller(kind: str, gains: dict | None = None, model: EulerLagrangeMo
         return MachineController(NonCertaintyEquivalentLaw(**gains.get("nce", {})), ce)
     if kind == "of":
         of = OutputFeedbackLaw(**gains.get("of", {}))
-        return MachineController(of, of, VelocityObserver(**gains.get("observer", {})))
+        return MachineController(of, ce, VelocityObserver(**gains.get("observer", {})))
     raise ValueError(f"unknown controller {kind!r} (expected ce, nce or of)")
 
 

@@ -4,7 +4,7 @@ import pytest
 
 from sharedctl.controllers import VelocityObserver
 
-from .helpers import WALL_K, WALL_T, line, omni_loop
+from .helpers import PAPER_CONVEX_K, PAPER_CONVEX_T, WALL_K, WALL_T, line, omni_loop
 from sharedctl.simulator import simulate
 
 
@@ -80,3 +80,39 @@ def test_converges_to_the_projection_when_the_wish_leaves():
     assert trace.inside.all()
     assert trace.q_r[-1, 1] == pytest.approx(4.0 - loop.reference.epsilon, abs=1e-6)
     assert np.linalg.norm(trace.q[-1] - trace.q_r[-1]) < 0.01
+
+
+def _pure_output_feedback():
+    from sharedctl.controllers import OutputFeedbackLaw
+    from sharedctl.simulator import MachineController
+
+    of = OutputFeedbackLaw()
+    return MachineController(of, of, VelocityObserver())
+
+
+@pytest.mark.parametrize("speed", [1.0, 3.0])
+def test_printed_law_alone_keeps_the_group_feasible_in_continuous_time(speed):
+    loop = omni_loop(WALL_K, WALL_T, line([-0.5, 3.0, 0.0], [0.0, 0.0, 0.0]), "of")
+    loop.controller = _pure_output_feedback()
+    trace = simulate(loop, np.array([-0.5, 3.5, 0.0]), np.array([0.0, speed, 0.0]), 2.0, 5e-4)
+    assert trace.finite and trace.inside.all()
+
+
+def test_printed_law_alone_sampled_at_500_hz_escapes_near_a_face():
+    """Why (12) on v̂ runs in the hazardous set: near a face the filtered-derivative terms of (25)
+    scale like k_o (k2+1)/x², and a 2 ms hold makes the loop unstable (docs/control.md §4.3)."""
+    from sharedctl.sampled import simulate_sampled
+
+    from sharedctl.sharing import Mode
+    from sharedctl.simulator import make_controller
+
+    # the paper's convex scenario: the operator creeps into the face x = −1 and the machine
+    # takes over 5 mm from it (at t ≈ 10.1 s), and the law flings the robot out
+    wish = line([-0.5, 2.0, 0.0], [-0.05, 0.15, 0.0])
+    loop = omni_loop(PAPER_CONVEX_K, PAPER_CONVEX_T, wish, "of", mode=Mode.SHARED)
+    loop.controller = _pure_output_feedback()
+    trace = simulate_sampled(loop, np.array([-0.9, 3.0, 0.0]), np.zeros(3), 14.0, 0.002)
+    assert not trace.inside.all()
+    loop.controller = make_controller("of")
+    trace = simulate_sampled(loop, np.array([-0.9, 3.0, 0.0]), np.zeros(3), 14.0, 0.002)
+    assert trace.inside.all()

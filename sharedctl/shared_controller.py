@@ -1,0 +1,150 @@
+"""The shared controller as a discrete-time step function, for processes that sample.
+
+The simulator (simulator.py) integrates plant and controller together; a real controller
+samples its measurements every period, holds its command, and advances its own states
+(θ̂, the law's filters, the observer) over the period. `SharedController.step` is that: the
+same sharing function (sharing.py), the same laws and the same re-initialisation policy as
+the simulator, with the controller's states advanced by one forward-Euler step of the law's
+own rates at the sampled (q, q̇) (at 500 Hz the fastest controller pole, the observer's
+K_a = 60 s⁻¹, gives K_a·dt = 0.12). State in, command out: `ControllerState` is explicit and
+immutable, so the daemon, a test and a replay all run the same code.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+from .constraints import FeasibleSet
+from .models import EulerLagrangeModel
+from .reference import ReferenceShape
+from .sets import SetClass
+from .sharing import ArbiterState, Authority, LawRole, Mode, SharingParameters, arbitrate, select_group
+from .simulator import MachineController
+from .transform import Desired, all_groups, coordinates
+
+
+@dataclass(frozen=True)
+class ControllerState:
+    arbiter: ArbiterState
+    theta_hat: np.ndarray
+    law_role: LawRole | None = None      # which law's state `law_state` holds (None: none engaged)
+    law_state: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    observer: np.ndarray = field(default_factory=lambda: np.zeros(0))
+
+
+@dataclass(frozen=True)
+class OperatorInput:
+    """What the operator sends: the wish (q_d, q̇_d, q̈_d) and the joystick force u_h with its intent v_h."""
+
+    desired: Desired
+    force: np.ndarray
+    intent: float
+
+
+@dataclass(frozen=True)
+class StepOutput:
+    u_s: np.ndarray          # generalised force to apply until the next sample
+    u_h: np.ndarray
+    u_f: np.ndarray
+    authority: Authority
+    set_class: SetClass
+    group: int | None
+    role: LawRole
+    k_h: float
+    k_f: float
+    q_r: np.ndarray          # projected reference (active group, or the one the machine would pick)
+    theta_estimate: np.ndarray
+    v_used: np.ndarray       # q̇ (state feedback) or the observer's v̂ (output feedback)
+    region_margins: np.ndarray
+
+
+@dataclass
+class SharedController:
+    """(46)/(47) with the configured machine laws, sampled every `dt` seconds."""
+
+    model: EulerLagrangeModel
+    feasible: FeasibleSet
+    machine: MachineController
+    sharing: SharingParameters = field(default_factory=SharingParameters)
+    reference: ReferenceShape = field(default_factory=ReferenceShape)
+
+    def initial_state(self, q0: np.ndarray, theta_hat0: np.ndarray | None = None) -> ControllerState:
+        machine_mode = self.sharing.mode is Mode.MACHINE
+        arbiter = ArbiterState(machine_latched=machine_mode, k_h=0.0 if machine_mode else 1.0)
+        theta = np.zeros(self.model.n_theta) if theta_hat0 is None else np.asarray(theta_hat0, float)
+        observer = self.machine.observer.initial_state(np.asarray(q0, float)) if self.machine.observer else np.zeros(0)
+        return ControllerState(arbiter, theta.copy(), None, np.zeros(0), observer)
+
+    def step(self, state: ControllerState, q: np.ndarray, v: np.ndarray | None, operator: OperatorInput, dt: float):
+        """One sample: returns (next state, output). `v` may be None for output feedback."""
+        model, feasible, machine = self.model, self.feasible, self.machine
+        observer = machine.observer
+        v_used = observer.velocity(q, state.observer) if observer else np.asarray(v, float)
+        mode = self.sharing.mode
+        intent = 0.0 if mode is Mode.MACHINE else operator.intent
+        q_r_all, values = all_groups(feasible.stack, q, v_used, operator.desired, self.reference, machine.tracking.lam)
+        arbiter, decision = arbitrate(feasible, self.sharing, state.arbiter, q, v_used, intent, dt, values.__getitem__)
+
+        theta_hat, law_role, law_state = state.theta_hat, state.law_role, state.law_state
+        engaged = decision.authority is not Authority.HUMAN and decision.group is not None
+        previous_law = machine.law(law_role) if law_role is not None else None
+        if engaged and (law_role is None or decision.group_changed or decision.role_changed or law_role is not decision.role):
+            if previous_law is not None:
+                theta_hat = previous_law.estimate(theta_hat, law_state)
+            law_role = decision.role
+            grp = feasible.groups[decision.group]
+            c = coordinates(grp, q, v_used, operator.desired, self.reference)
+            law_state = machine.law(law_role).initial_state(model, grp, c, q, v_used, theta_hat)
+        elif not engaged and previous_law is not None:
+            theta_hat = previous_law.estimate(theta_hat, law_state)
+            law_role, law_state = None, np.zeros(0)
+
+        u_h = np.zeros(model.n) if mode is Mode.MACHINE else np.asarray(operator.force, float)
+        u_f = np.zeros(model.n)
+        theta_next, law_next = theta_hat, law_state
+        if engaged:
+            grp = feasible.groups[decision.group]
+            c = coordinates(grp, q, v_used, operator.desired, self.reference)
+            if c.inside:
+                law = machine.law(law_role)
+                out = law.evaluate(model, grp, c, q, v_used, theta_hat, law_state)
+                u_f = out.u
+                law_next = law_state + dt * out.state_dot
+                if decision.authority is Authority.MACHINE:
+                    theta_next = theta_hat + dt * out.theta_dot
+            else:
+                u_f = self.recovery_force(grp, q, v_used)
+        if decision.authority is Authority.HUMAN:
+            u_s = u_h
+        elif decision.authority is Authority.MACHINE:
+            u_s = u_f
+        else:
+            u_s = decision.k_h * u_h + decision.k_f * u_f
+
+        observer_next = state.observer + dt * observer.derivative(q, state.observer) if observer else state.observer
+        ref_group = decision.group if engaged else select_group(feasible, decision.situation, values.__getitem__)
+        q_r = q_r_all[ref_group] if ref_group is not None else np.full(model.n, np.nan)
+        estimate = machine.law(law_role).estimate(theta_next, law_next) if law_role is not None else theta_next
+        output = StepOutput(
+            u_s=u_s, u_h=u_h, u_f=u_f, authority=decision.authority, set_class=decision.situation.overall,
+            group=decision.group, role=decision.role, k_h=decision.k_h, k_f=decision.k_f, q_r=q_r,
+            theta_estimate=estimate, v_used=v_used, region_margins=feasible.region_margins(q),
+        )
+        next_state = replace(state, arbiter=arbiter, theta_hat=theta_next, law_role=law_role, law_state=law_next, observer=observer_next)
+        if not np.all(np.isfinite(u_s)) or not np.all(np.isfinite(theta_next)) or not np.all(np.isfinite(law_next)):
+            raise NonFiniteCommand("the shared controller produced a non-finite value")
+        return next_state, output
+
+    recovery_damping: float = 40.0      # N s/m
+    recovery_stiffness: float = 400.0   # N/m
+
+    def recovery_force(self, group, q, v) -> np.ndarray:
+        """Outside the active group (possible only in sampled, delayed operation) the laws have
+        no value (z = ln(x/x_r) needs x < 0): brake, and push back along the faces crossed."""
+        excess = np.maximum(group.values(q) + self.reference.epsilon, 0.0)
+        return -self.recovery_damping * v - self.recovery_stiffness * (group.K.T @ excess)
+
+
+class NonFiniteCommand(ArithmeticError):
+    """Raised instead of ever returning a non-finite command; the caller stops the robot."""
