@@ -14,6 +14,10 @@ COMMANDS = (
     "sharedctl.services.sim_command",
     "sharedctl.services.paper_command",
     "sharedctl.services.fuzz_command",
+    "sharedctl.services.robot.command",
+    "sharedctl.services.controller.command",
+    "sharedctl.services.console.command",
+    "sharedctl.services.demo_command",
 )
 
 
@@ -27,7 +31,7 @@ def build_parser() -> argparse.ArgumentParser:
         try:
             module = importlib.import_module(module_name)
         except ModuleNotFoundError as exc:  # a command not built yet must not break the others
-            if exc.name != module_name:
+            if exc.name is None or not module_name.startswith(exc.name):
                 raise
             continue
         module.add_parser(subparsers)

@@ -1,0 +1,1 @@
+"""The controller process (see docs/services.md)."""

@@ -1,0 +1,1 @@
+"""The robot process (see docs/services.md)."""
