@@ -1,0 +1,102 @@
+"""`sharedctl robot` — the simulated robot: true dynamics behind three simulated ODrive axes.
+
+    sharedctl robot [--scenario FILE|NAME] [--can-interface I --can-channel C --can-option k=v ...]
+                    [--zenoh-listen EP | --zenoh-connect EP] [--robot-id ID] [--duration S]
+
+Speaks CANSimple on the CAN bus (services/can_bus.py picks vcan0 or host-local udp_multicast),
+publishes GroundTruth on `sharedctl/v1/<robot>/truth` (100 Hz) and a liveliness token on
+`sharedctl/v1/<robot>/alive/robot`. `[robot_sim]` in the scenario overrides the simulation
+defaults (see plant.RobotSimConfig). SIGINT/SIGTERM: stops within 2 s, exit 0.
+"""
+from __future__ import annotations
+
+import sys
+
+from sharedctl.models import OmniRobot
+from sharedctl.protocol.errors import KeyExprError
+from sharedctl.protocol.keys import check_robot_id
+from sharedctl.scenario import ScenarioError
+
+from .. import can_bus, zenoh_session
+from ..lifecycle import StopFlag
+from ..scenario_files import load
+from .plant import RobotSimConfig, RobotSimConfigError
+from .process import CpuMeter, RobotProcess
+from .simulation import RobotSimulation
+
+PROG = "sharedctl robot"
+
+
+def add_parser(subparsers) -> None:
+    p = subparsers.add_parser("robot", help="run the simulated robot (three ODrive axes on CAN, ground truth on Zenoh)")
+    p.add_argument("--scenario", default="paper_convex",
+                   help="scenario TOML file or packaged name (default: paper_convex): [robot], [initial], [robot_sim]")
+    can_bus.add_arguments(p)
+    z = p.add_mutually_exclusive_group()
+    z.add_argument("--zenoh-listen", metavar="EP",
+                   help=f"loopback endpoint to listen on (default: {zenoh_session.DEFAULT_ENDPOINT})")
+    z.add_argument("--zenoh-connect", metavar="EP", help="loopback endpoint of a peer to connect to")
+    p.add_argument("--robot-id", default="robot1", help="robot id in the Zenoh keys (default: robot1)")
+    p.add_argument("--duration", type=float, metavar="S", help="stop after S seconds (default: run until SIGINT/SIGTERM)")
+    p.set_defaults(handler=run)
+
+
+def _fail(text: str, code: int = 2) -> int:
+    print(f"{PROG}: {text}", file=sys.stderr)
+    return code
+
+
+def build_simulation(scenario_name: str) -> RobotSimulation:
+    """Scenario → simulation (true parameters from [robot], start from [initial], [robot_sim] settings)."""
+    scenario = load(scenario_name)
+    loop, q0, qd0 = scenario.closed_loop()
+    if not isinstance(loop.model, OmniRobot):
+        raise ScenarioError("robot.kind must be omni3 for sharedctl robot")
+    config = RobotSimConfig.from_table(scenario.data.get("robot_sim"))
+    return RobotSimulation(loop.model, config, q0, qd0)
+
+
+def run(args) -> int:
+    stop = StopFlag().install()
+    try:
+        sim = build_simulation(args.scenario)
+        robot_id = check_robot_id(args.robot_id)
+        spec = can_bus.spec_from_args(args)
+        listen = [args.zenoh_listen] if args.zenoh_listen else []
+        connect = [args.zenoh_connect] if args.zenoh_connect else []
+        if not listen and not connect:
+            listen = [zenoh_session.DEFAULT_ENDPOINT]
+        zenoh_session.config(listen, connect)  # validates the endpoints (loopback only)
+    except (ScenarioError, RobotSimConfigError, KeyExprError, ValueError) as exc:
+        return _fail(str(exc))
+    if args.duration is not None and not args.duration > 0:
+        return _fail("--duration must be positive")
+
+    try:
+        bus = can_bus.open_bus(spec)
+    except Exception as exc:  # python-can raises several types (CanError, OSError, ValueError)
+        return _fail(f"cannot open CAN bus {spec.describe()}: {exc}", 1)
+    try:
+        session = zenoh_session.open_session(listen, connect)
+    except Exception as exc:  # zenoh.ZError, e.g. the port is taken
+        bus.shutdown()
+        return _fail(f"cannot open Zenoh session ({' '.join(listen + connect)}): {exc}", 1)
+
+    cpu = CpuMeter()
+    process = None
+    try:
+        process = RobotProcess(sim, bus, session, robot_id)
+        c = sim.config
+        endpoint = f"listen {listen[0]}" if listen else f"connect {connect[0]}"
+        print(f"{PROG}: {robot_id} on CAN {spec.describe()}, Zenoh {endpoint}; physics {c.physics_rate_hz:g} Hz, "
+              f"encoder {c.encoder_rate_hz:g} Hz, heartbeat {c.heartbeat_rate_hz:g} Hz, truth {c.truth_rate_hz:g} Hz, "
+              f"watchdog {c.watchdog_timeout:g} s", flush=True)
+        process.run(stop, args.duration)
+    finally:
+        if process is not None:
+            process.close()
+        session.close()
+        bus.shutdown()
+    print(f"{PROG}: stopped after {sim.time:.2f} s: {process.summary()}; cpu {100 * cpu.fraction():.0f}% of one core",
+          flush=True)
+    return 0
