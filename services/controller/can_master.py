@@ -1,0 +1,217 @@
+"""CAN master for the three ODrive wheel axes (CANSimple, see protocol/README.md §1).
+
+* Arming: Clear_Errors, Set_Controller_Mode (TORQUE_CONTROL, PASSTHROUGH), Set_Axis_State
+  CLOSED_LOOP_CONTROL to every axis; armed when each axis has sent a Heartbeat in
+  CLOSED_LOOP_CONTROL without error *after* the request; otherwise retried every
+  `arm_timeout` seconds. While arming the caller keeps sending zero torque, which feeds the
+  drives' watchdogs from the moment they close the loop.
+* Monitoring: Heartbeat state and error bits per axis (error changes → events), encoder
+  estimates per axis (for odometry and the feedback age).
+* Commands: Set_Input_Torque per axis, Estop to all axes, IDLE to all axes.
+* Receive path: the frames this side sends (Set_*, Estop, Clear_Errors, RTR polls) come back
+  on udp_multicast and are ignored; a frame the codec refuses is counted and skipped.
+
+Frames are built and read only with `sharedctl.protocol.cansimple`.
+"""
+from __future__ import annotations
+
+import time
+from collections import Counter
+from dataclasses import dataclass, field
+
+import can
+
+from sharedctl.protocol import cansimple as cs
+from sharedctl.protocol.canframe import DEFAULT_WHEEL_NODES
+from sharedctl.protocol.errors import ProtocolError
+from sharedctl.protocol.odrive_enums import AxisState, ControlMode, InputMode, ODriveError
+
+from .odometry import AxisEstimate
+
+HOST_FRAMES = (
+    cs.Estop, cs.SetAxisState, cs.SetControllerMode, cs.SetInputVel, cs.SetInputTorque, cs.SetLimits,
+    cs.ClearErrors, cs.PollRequest,
+)   # the direction this side sends: echoes on udp_multicast, ignored
+
+
+@dataclass
+class AxisStatus:
+    """What one drive last told us."""
+
+    node_id: int
+    state: AxisState | None = None
+    error: ODriveError = ODriveError.NONE
+    heartbeat_at: float = float("-inf")        # s, when the last heartbeat arrived
+    estimate: AxisEstimate | None = None
+
+
+@dataclass(frozen=True)
+class CanEvent:
+    """Something the master noticed, for the daemon to publish as an `Event`."""
+
+    kind: str          # EventKind value: "fault", "watchdog_trip", "fault_cleared", "info"
+    severity: str
+    text: str
+
+
+@dataclass
+class CanMaster:
+    bus: object                                  # can.BusABC (send, recv)
+    nodes: tuple[int, ...] = DEFAULT_WHEEL_NODES
+    arm_timeout: float = 0.5                     # s to see CLOSED_LOOP heartbeats before retrying
+    clock: object = time.monotonic
+    axes: dict = field(init=False)
+    rx_frames: int = 0
+    tx_frames: int = 0
+    echoes_ignored: int = 0
+    bad_frames: Counter = field(default_factory=Counter)
+    tx_errors: Counter = field(default_factory=Counter)
+    arm_attempts: int = 0
+    arm_requested_at: float | None = None
+    events: list = field(default_factory=list)
+
+    def __post_init__(self) -> None:
+        self.axes = {n: AxisStatus(n) for n in self.nodes}
+
+    # ------------------------------------------------------------------ send
+    def send(self, message) -> bool:
+        frame = cs.encode(message)
+        msg = can.Message(
+            arbitration_id=frame.arbitration_id, data=frame.data, is_remote_frame=frame.is_remote,
+            dlc=frame.dlc, is_extended_id=False,
+        )
+        try:
+            self.bus.send(msg, timeout=0.01)
+        except (can.CanError, OSError) as exc:
+            self.tx_errors[type(exc).__name__] += 1
+            return False
+        self.tx_frames += 1
+        return True
+
+    def request_arming(self) -> None:
+        """Clear errors, torque control + passthrough, closed loop: to every axis."""
+        now = self.clock()
+        for n in self.nodes:
+            self.send(cs.ClearErrors(n))
+            self.send(cs.SetControllerMode(n, ControlMode.TORQUE_CONTROL, InputMode.PASSTHROUGH))
+            self.send(cs.SetAxisState(n, AxisState.CLOSED_LOOP_CONTROL))
+        self.arm_requested_at = now
+        self.arm_attempts += 1
+
+    def arming_done(self, now: float) -> bool:
+        """True once every axis reported CLOSED_LOOP without error since the request; retries on timeout."""
+        if self.arm_requested_at is None:
+            self.request_arming()
+            return False
+        if all(self._armed(a) for a in self.axes.values()):
+            return True
+        if now - self.arm_requested_at > self.arm_timeout:
+            missing = [n for n, a in self.axes.items() if not self._armed(a)]
+            self.events.append(CanEvent(
+                "fault", "warning", f"arming attempt {self.arm_attempts}: axes {missing} not in CLOSED_LOOP_CONTROL; retrying",
+            ))
+            self.request_arming()
+        return False
+
+    def _armed(self, axis: AxisStatus) -> bool:
+        return (
+            axis.heartbeat_at > self.arm_requested_at and axis.state is AxisState.CLOSED_LOOP_CONTROL
+            and axis.error == ODriveError.NONE
+        )
+
+    def reset_arming(self) -> None:
+        self.arm_requested_at = None
+
+    def send_torques(self, torques) -> None:
+        for n, tau in zip(self.nodes, torques):
+            self.send(cs.SetInputTorque(n, float(tau)))
+
+    def estop_all(self) -> None:
+        for n in self.nodes:
+            self.send(cs.Estop(n))
+
+    def idle_all(self) -> None:
+        for n in self.nodes:
+            self.send(cs.SetAxisState(n, AxisState.IDLE))
+
+    # --------------------------------------------------------------- receive
+    def receive_until(self, deadline: float) -> int:
+        """Read and handle frames until `deadline` (clock time); returns how many were read."""
+        count = 0
+        while True:
+            remaining = deadline - self.clock()
+            try:
+                msg = self.bus.recv(timeout=max(remaining, 0.0))
+            except (can.CanError, OSError, ValueError) as exc:
+                self.bad_frames[type(exc).__name__] += 1
+                msg = None
+            if msg is None:
+                if remaining <= 0:
+                    return count
+                continue
+            count += 1
+            self.handle(msg, self.clock())
+
+    def handle(self, msg, now: float) -> None:
+        """One received python-can message: decode, ignore our own direction, update the axes."""
+        self.rx_frames += 1
+        try:
+            frame = cs.decode(
+                msg.arbitration_id, bytes(msg.data), msg.is_remote_frame, dlc=msg.dlc,
+                is_extended_id=msg.is_extended_id, nodes=self.nodes,
+            )
+        except ProtocolError as exc:
+            self.bad_frames[type(exc).__name__] += 1
+            return
+        except Exception as exc:  # noqa: BLE001 — a bad frame never escapes the receive loop
+            self.bad_frames[f"unexpected_{type(exc).__name__}"] += 1
+            return
+        if isinstance(frame, HOST_FRAMES):
+            self.echoes_ignored += 1
+            return
+        axis = self.axes[frame.node_id]
+        if isinstance(frame, cs.GetEncoderEstimates):
+            axis.estimate = AxisEstimate(frame.pos_estimate, frame.vel_estimate, now)
+        elif isinstance(frame, cs.Heartbeat):
+            self._heartbeat(axis, frame, now)
+
+    def _heartbeat(self, axis: AxisStatus, frame: cs.Heartbeat, now: float) -> None:
+        error = ODriveError(frame.axis_error)
+        if error != axis.error:
+            new_bits = ODriveError(error & ~axis.error)
+            if error == ODriveError.NONE:
+                self.events.append(CanEvent("fault_cleared", "info", f"axis {axis.node_id}: errors cleared"))
+            elif new_bits & ODriveError.WATCHDOG_TIMER_EXPIRED:
+                self.events.append(CanEvent("watchdog_trip", "error", f"axis {axis.node_id}: watchdog expired ({_names(error)})"))
+            elif new_bits:
+                self.events.append(CanEvent("fault", "error", f"axis {axis.node_id}: {_names(error)}"))
+        axis.error = error
+        axis.state = frame.axis_state
+        axis.heartbeat_at = now
+
+    # ---------------------------------------------------------------- status
+    def estimates(self) -> list:
+        return [self.axes[n].estimate for n in self.nodes]
+
+    def faulted_axes(self) -> list[int]:
+        """Axes that report an error or left closed loop (meaningful once armed)."""
+        return [
+            n for n, a in self.axes.items()
+            if a.error != ODriveError.NONE or (a.state is not None and a.state is not AxisState.CLOSED_LOOP_CONTROL)
+        ]
+
+    def take_events(self) -> list:
+        events, self.events = self.events, []
+        return events
+
+    @property
+    def bad_frame_count(self) -> int:
+        return sum(self.bad_frames.values())
+
+
+def _names(error: ODriveError) -> str:
+    names = [m.name for m in ODriveError if m.value and (error & m.value) == m.value and m.name]
+    unknown = int(error) & ~sum(m.value for m in ODriveError)
+    if unknown:
+        names.append(f"0x{unknown:X}")
+    return "|".join(names) or "NONE"

@@ -1,0 +1,85 @@
+"""`sharedctl controller`: the controller/arbiter daemon (docs/services.md).
+
+    sharedctl controller [--scenario FILE|name] [--controller ce|nce|of]
+                         [--can-interface I --can-channel C --can-option k=v …]
+                         [--zenoh-listen EP | --zenoh-connect EP] [--robot-id ID]
+                         [--rate 500] [--telemetry-rate 50] [--torque-limit 60] [--duration S]
+"""
+from __future__ import annotations
+
+import sys
+
+from sharedctl.protocol.keys import check_robot_id
+from sharedctl.protocol.errors import KeyExprError
+from sharedctl.scenario import ScenarioError
+
+from .. import can_bus, zenoh_session
+from ..lifecycle import StopFlag
+from ..scenario_files import load
+from .daemon import ControllerDaemon, DaemonConfig
+
+PROG = "sharedctl controller"
+
+
+def add_parser(subparsers) -> None:
+    p = subparsers.add_parser("controller", help="run the controller/arbiter daemon (CAN master + shared controller)")
+    p.add_argument("--scenario", default="paper_convex", help="scenario TOML file or packaged name (default: paper_convex)")
+    p.add_argument("--controller", choices=("ce", "nce", "of"), help="machine law (default: the scenario's, else ce)")
+    can_bus.add_arguments(p)
+    z = p.add_mutually_exclusive_group()
+    z.add_argument("--zenoh-listen", metavar="EP", help=f"listen on this loopback endpoint (default {zenoh_session.DEFAULT_ENDPOINT})")
+    z.add_argument("--zenoh-connect", metavar="EP", help="connect to a peer listening on this loopback endpoint")
+    p.add_argument("--robot-id", default="robot1", help="robot id in the key expressions (default robot1)")
+    p.add_argument("--rate", type=float, default=500.0, help="control loop rate, Hz (default 500)")
+    p.add_argument("--telemetry-rate", type=float, default=50.0, help="RobotState rate, Hz (default 50)")
+    p.add_argument("--torque-limit", type=float, default=60.0, help="wheel torque limit, N·m (default 60)")
+    p.add_argument("--feedback-timeout-ms", type=float, default=50.0, help="CAN feedback age that triggers Estop (default 50)")
+    p.add_argument("--duration", type=float, help="stop after this many seconds (default: run until SIGINT/SIGTERM)")
+    p.add_argument("--quiet", action="store_true", help="no warnings on stderr (events are still published)")
+    p.set_defaults(handler=run)
+
+
+def run(args) -> int:
+    stop = StopFlag().install()
+    try:
+        robot_id = check_robot_id(args.robot_id)
+        if not (args.rate > 0 and args.telemetry_rate > 0 and args.torque_limit > 0 and args.feedback_timeout_ms > 0):
+            raise ValueError("--rate, --telemetry-rate, --torque-limit and --feedback-timeout-ms must be positive")
+        scenario = load(args.scenario)
+        loop, q0, _ = scenario.closed_loop(args.controller)
+        spec = can_bus.spec_from_args(args)
+        listen = [args.zenoh_listen] if args.zenoh_listen else ([] if args.zenoh_connect else [zenoh_session.DEFAULT_ENDPOINT])
+        connect = [args.zenoh_connect] if args.zenoh_connect else []
+        zenoh_session.config(listen, connect)   # validates the endpoints before anything opens
+    except (ScenarioError, KeyExprError, ValueError) as exc:
+        print(f"{PROG}: {exc}", file=sys.stderr)
+        return 2
+    config = DaemonConfig(
+        robot_id=robot_id, rate=args.rate, telemetry_rate=args.telemetry_rate, torque_limit=args.torque_limit,
+        feedback_timeout=args.feedback_timeout_ms / 1e3, duration=args.duration, verbose=not args.quiet,
+    )
+    bus = session = daemon = None
+    try:
+        bus = can_bus.open_bus(spec)
+        session = zenoh_session.open_session(listen, connect)
+        daemon = ControllerDaemon(config, loop, q0, bus, session)
+        zenoh_desc = f"listen {listen[0]}" if listen else f"connect {connect[0]}"
+        print(
+            f"{PROG}: robot {robot_id}, scenario {scenario.name}, controller {loop.controller.name}, "
+            f"{config.rate:g} Hz (telemetry {config.telemetry_rate:g} Hz), torque limit {config.torque_limit:g} N·m, "
+            f"CAN {spec.describe()}, Zenoh {zenoh_desc}",
+            flush=True,
+        )
+        summary = daemon.run(stop)
+        print(summary.line(), flush=True)
+        return 0
+    except Exception as exc:  # noqa: BLE001 — report, clean up, non-zero exit
+        print(f"{PROG}: {type(exc).__name__}: {exc}", file=sys.stderr)
+        return 1
+    finally:
+        if daemon is not None:
+            daemon.undeclare()
+        if session is not None:
+            session.close()
+        if bus is not None:
+            bus.shutdown()

@@ -1,0 +1,356 @@
+"""The controller/arbiter daemon's loop: wheels → odometry → operator → shared controller → torques.
+
+Every control period (500 Hz by default, `RateClock`):
+  1. latest wheel encoder estimates → odometry (q, q̇)                    (odometry.py)
+  2. latest operator command → OperatorInput, with the staleness policy   (operator_input.py)
+  3. `SharedController.step(state, q, q̇ or None, operator, dt)`          (sharedctl; None for `of`)
+  4. τ = B(ψ)⁻¹ u_s (`OmniRobot.wheel_torques`), scaled down uniformly so that max|τ_j| ≤ the
+     torque limit (the direction of u_s is kept), Set_Input_Torque to every axis  (can_master.py)
+then it reads CAN frames until just before the next tick. RobotState goes out at the telemetry
+rate, events when something changes (rate-limited), a Heartbeat message at 1 Hz and a
+liveliness token for as long as the daemon runs.
+
+Modes: ARMING (zero torque sent, waiting for CLOSED_LOOP heartbeats) → RUNNING → ESTOPPED.
+Estop (Estop frame to every axis, no more torque commands, latched) on: the operator's estop
+flag; wheel feedback older than `feedback_timeout` while running; an axis reporting an error
+or leaving closed loop; a non-finite command. An operator command with control_request
+"take" (and estop false) sent after the estop re-arms the axes.
+"""
+from __future__ import annotations
+
+import enum
+import math
+import sys
+import threading
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from sharedctl.protocol import keys
+from sharedctl.protocol.messages import Heartbeat
+from sharedctl.protocol.msgpack_codec import encode_message
+from sharedctl.protocol.wire_types import Dims
+from sharedctl.shared_controller import NonFiniteCommand, SharedController
+
+from ..lifecycle import RateClock
+from .can_master import CanMaster
+from .odometry import WheelOdometry, feedback_ages
+from .operator_input import OperatorInputPolicy
+from .telemetry import EventLimiter, Link, robot_state
+
+ROLE = "controller"
+
+
+class Mode(enum.Enum):
+    ARMING = "arming"
+    RUNNING = "running"
+    ESTOPPED = "estopped"
+
+
+@dataclass
+class DaemonConfig:
+    robot_id: str = "robot1"
+    rate: float = 500.0                 # Hz, control loop
+    telemetry_rate: float = 50.0        # Hz, RobotState
+    torque_limit: float = 60.0          # N·m per wheel (the simulated drive's limit)
+    feedback_timeout: float = 0.05      # s: wheel feedback older than this (once armed) → estop
+    operator_timeout: float = 0.3       # s: operator silence → hands-off
+    arm_timeout: float = 0.5            # s per arming attempt
+    duration: float | None = None       # s; None: until SIGINT/SIGTERM
+    event_interval: float = 1.0         # s between events of one topic
+    verbose: bool = True                # warnings and errors to stderr
+
+
+class LatenessHistogram:
+    """Tick lateness in 10 µs bins up to 50 ms (quantiles over the whole run, fixed memory)."""
+
+    BIN = 1e-5
+
+    def __init__(self, bins: int = 5000) -> None:
+        self.counts = np.zeros(bins + 1, dtype=np.int64)
+        self.n = 0
+        self.max = 0.0
+
+    def add(self, lateness: float) -> None:
+        self.counts[min(int(lateness / self.BIN), len(self.counts) - 1)] += 1
+        self.n += 1
+        self.max = max(self.max, lateness)
+
+    def quantile(self, p: float) -> float:
+        if self.n == 0:
+            return 0.0
+        k = int(np.searchsorted(np.cumsum(self.counts), math.ceil(p * self.n)))
+        return (k + 1) * self.BIN
+
+
+@dataclass
+class Summary:
+    ticks: int = 0
+    elapsed: float = 0.0
+    rate: float = 0.0
+    missed: int = 0
+    late: int = 0
+    jitter_p50_ms: float = 0.0
+    jitter_p99_ms: float = 0.0
+    jitter_max_ms: float = 0.0
+    cpu_percent: float = 0.0
+    frames_rx: int = 0
+    frames_tx: int = 0
+    bad_frames: int = 0
+    commands_accepted: int = 0
+    rejections: dict = field(default_factory=dict)
+    estops: int = 0
+    saturated: int = 0
+    mode: str = ""
+
+    def line(self) -> str:
+        rej = sum(self.rejections.values())
+        detail = ", ".join(f"{k} {v}" for k, v in sorted(self.rejections.items()))
+        return (
+            f"sharedctl controller: stopped after {self.elapsed:.1f} s: {self.ticks} ticks at {self.rate:.1f} Hz, "
+            f"{self.missed} missed / {self.late} late deadlines, jitter p50 {self.jitter_p50_ms:.3f} ms "
+            f"p99 {self.jitter_p99_ms:.3f} ms max {self.jitter_max_ms:.2f} ms, CPU {self.cpu_percent:.0f}% of one core; "
+            f"CAN frames rx {self.frames_rx} tx {self.frames_tx} bad {self.bad_frames}; operator commands "
+            f"{self.commands_accepted} accepted, {rej} rejected{f' ({detail})' if detail else ''}; "
+            f"estops {self.estops}, torque-limited ticks {self.saturated}"
+        )
+
+
+class ControllerDaemon:
+    """One controller process's state; `run(stop)` is the loop."""
+
+    def __init__(self, config: DaemonConfig, loop, q0, bus, session) -> None:
+        self.config = config
+        self.loop = loop
+        self.model = loop.model
+        if not hasattr(self.model, "wheel_torques"):
+            raise ValueError("the controller daemon drives the omnidirectional robot (robot.kind = omni3)")
+        self.controller = SharedController(loop.model, loop.feasible, loop.controller, loop.sharing, loop.reference)
+        self.output_feedback = loop.controller.observer is not None
+        self.state = self.controller.initial_state(q0, loop.theta_hat0)
+        self.dims = Dims(dof=self.model.n, n_theta=self.model.n_theta, n_wheels=3)
+        self.odometry = WheelOdometry(self.model, q0)
+        self.policy = OperatorInputPolicy(loop.human.kp, config.operator_timeout, self.dims)
+        self.master = CanMaster(bus, arm_timeout=config.arm_timeout)
+        self.session = session
+        self.events = EventLimiter(config.event_interval, ROLE)
+        self.lock = threading.Lock()
+        self.mode = Mode.ARMING
+        self.period = 1.0 / config.rate
+        self.q = np.asarray(q0, float).copy()
+        self.v = np.zeros_like(self.q)
+        self.out = None
+        self.u_s = np.zeros(self.model.n)
+        self.tau = np.zeros(3)
+        self.last_step_at: float | None = None
+        self.estop_take_mark = 0
+        self.estops = 0
+        self.saturated = 0
+        self.state_seq = 0
+        self.heartbeat_seq = 0
+        self.started_at = time.monotonic()
+        self.last_authority = None
+        self.last_hands_off_reason = None
+        self.last_rejected = 0
+        self.histogram = LatenessHistogram()
+        self.late = 0
+        self._declare(session)
+
+    # ------------------------------------------------------------------ Zenoh
+    def _declare(self, session) -> None:
+        robot = self.config.robot_id
+        self.state_pub = session.declare_publisher(keys.state_key(robot))
+        self.event_pub = session.declare_publisher(keys.events_key(robot))
+        self.alive_pub = session.declare_publisher(keys.alive_key(robot, ROLE))
+        self.token = session.liveliness().declare_token(keys.alive_key(robot, ROLE))
+        self.subscriber = session.declare_subscriber(keys.operator_cmd_key(robot), self._on_command)
+
+    def _on_command(self, sample) -> None:
+        """Zenoh callback thread: hand the payload to the policy (which never raises)."""
+        try:
+            payload = sample.payload.to_bytes()
+        except Exception:  # noqa: BLE001
+            payload = b""
+        with self.lock:
+            self.policy.offer(payload, time.monotonic(), time.time())
+
+    def undeclare(self) -> None:
+        for entity in (self.subscriber, self.token, self.state_pub, self.event_pub, self.alive_pub):
+            try:
+                entity.undeclare()
+            except Exception:  # noqa: BLE001 — closing anyway
+                pass
+
+    def emit(self, now: float, topic: str, kind: str, severity: str, text: str) -> None:
+        event = self.events.make(now, time.time(), topic, kind, severity, text)
+        if event is None:
+            return
+        if self.config.verbose and severity in ("warning", "error", "critical"):
+            print(f"sharedctl controller: {severity}: {event.text}", file=sys.stderr, flush=True)
+        try:
+            self.event_pub.put(encode_message(event))
+        except Exception as exc:  # noqa: BLE001 — telemetry must not stop the loop
+            print(f"sharedctl controller: event not sent: {exc}", file=sys.stderr)
+
+    # ------------------------------------------------------------------- loop
+    def run(self, stop) -> Summary:
+        config = self.config
+        clock = RateClock(self.period)
+        telemetry_every = max(1, round(config.rate / config.telemetry_rate))
+        heartbeat_every = max(1, round(config.rate))
+        cpu0, t0 = time.process_time(), time.monotonic()
+        self.master.request_arming()
+        ticks = 0
+        try:
+            while not stop.stopped:
+                lateness = clock.wait()
+                self.histogram.add(lateness)
+                if lateness > 0.5 * self.period:
+                    self.late += 1
+                now = time.monotonic()
+                if config.duration is not None and now - t0 >= config.duration:
+                    break
+                self.tick(now)
+                if ticks % telemetry_every == 0:
+                    self.publish_state(now)
+                if ticks % heartbeat_every == 0:
+                    self.publish_heartbeat()
+                ticks += 1
+                self.master.receive_until(clock.next - 2e-4)
+        finally:
+            self.shutdown()
+        elapsed = time.monotonic() - t0
+        cpu = time.process_time() - cpu0
+        return Summary(
+            ticks=ticks, elapsed=elapsed, rate=ticks / elapsed if elapsed > 0 else 0.0, missed=clock.missed,
+            late=self.late, jitter_p50_ms=self.histogram.quantile(0.5) * 1e3,
+            jitter_p99_ms=self.histogram.quantile(0.99) * 1e3, jitter_max_ms=self.histogram.max * 1e3,
+            cpu_percent=100.0 * cpu / elapsed if elapsed > 0 else 0.0, frames_rx=self.master.rx_frames,
+            frames_tx=self.master.tx_frames, bad_frames=self.master.bad_frame_count,
+            commands_accepted=self.policy.accepted, rejections=dict(self.policy.rejections), estops=self.estops,
+            saturated=self.saturated, mode=self.mode.value,
+        )
+
+    def tick(self, now: float) -> None:
+        estimates = self.master.estimates()
+        self.q, v = self.odometry.update(estimates)
+        self.v = v
+        feedback_age = float(np.max(feedback_ages(estimates, now)))
+        for ev in self.master.take_events():
+            self.emit(now, f"can:{ev.text[:8]}", ev.kind, ev.severity, ev.text)
+        with self.lock:
+            operator, status = self.policy.operator_input(now, self.q)
+            take_requests = self.policy.take_requests
+            current = self.policy.current
+            rejected = self.policy.rejected
+            rejections = dict(self.policy.rejections)
+        self.status = status
+        self.feedback_age = feedback_age
+        if rejected != self.last_rejected:
+            self.last_rejected = rejected
+            self.emit(now, "rejection", "rejection", "warning", f"operator commands rejected so far: {rejections}")
+        if status.reason != self.last_hands_off_reason:
+            self.last_hands_off_reason = status.reason
+            self.emit(now, "operator", "info", "info", f"operator input: {status.reason}")
+
+        if status.estop_requested and self.mode is not Mode.ESTOPPED:
+            self.estop(now, "estop requested by the operator")
+        if self.mode is Mode.ARMING:
+            self.u_s, self.tau = np.zeros(self.model.n), np.zeros(3)
+            self.master.send_torques(self.tau)   # feeds the watchdogs as soon as an axis closes its loop
+            if self.master.arming_done(now):
+                self.mode = Mode.RUNNING
+                self.last_step_at = None
+                self.emit(now, "armed", "info", "info", f"axes armed (attempt {self.master.arm_attempts})")
+        elif self.mode is Mode.RUNNING:
+            faulted = self.master.faulted_axes()
+            if feedback_age > self.config.feedback_timeout:
+                self.estop(now, f"CAN feedback lost: oldest wheel estimate {feedback_age * 1e3:.0f} ms old")
+            elif faulted:
+                self.estop(now, f"axes {faulted} left closed loop or report errors")
+            else:
+                self.control(now, operator)
+        elif self.mode is Mode.ESTOPPED:
+            self.u_s, self.tau = np.zeros(self.model.n), np.zeros(3)
+            if (
+                take_requests > self.estop_take_mark and current is not None and not current.estop
+                and feedback_age <= self.config.feedback_timeout
+            ):
+                with self.lock:
+                    self.policy.clear_estop()
+                self.state = self.controller.initial_state(self.q, self.state.theta_hat)
+                self.master.reset_arming()
+                self.master.request_arming()
+                self.mode = Mode.ARMING
+                self.emit(now, "estop_cleared", "estop_cleared", "info", "estop cleared by the operator (take): re-arming")
+
+    def control(self, now: float, operator) -> None:
+        dt = self.period if self.last_step_at is None else min(max(now - self.last_step_at, 0.0), 4 * self.period)
+        self.last_step_at = now
+        try:
+            self.state, out = self.controller.step(self.state, self.q, None if self.output_feedback else self.v, operator, dt)
+            tau = self.model.wheel_torques(self.q, out.u_s)
+            if not np.all(np.isfinite(tau)):
+                raise NonFiniteCommand("non-finite wheel torque")
+        except NonFiniteCommand as exc:
+            self.tau, self.u_s = np.zeros(3), np.zeros(self.model.n)
+            self.master.send_torques(self.tau)
+            self.estop(now, f"non-finite command: {exc}")
+            return
+        peak = float(np.max(np.abs(tau)))
+        if peak > self.config.torque_limit:
+            tau = tau * (self.config.torque_limit / peak)
+            self.saturated += 1
+        self.out, self.u_s, self.tau = out, out.u_s, tau
+        self.master.send_torques(tau)
+        if out.authority != self.last_authority:
+            if self.last_authority is not None:
+                self.emit(now, "authority", "authority_change", "info",
+                          f"authority {self.last_authority.name.lower()} -> {out.authority.name.lower()}")
+            self.last_authority = out.authority
+
+    def estop(self, now: float, reason: str) -> None:
+        self.master.estop_all()
+        self.tau, self.u_s = np.zeros(3), np.zeros(self.model.n)
+        self.mode = Mode.ESTOPPED
+        self.estops += 1
+        with self.lock:
+            self.estop_take_mark = self.policy.take_requests
+        self.emit(now, f"estop:{reason[:12]}", "estop", "critical", f"ESTOP: {reason}")
+
+    # -------------------------------------------------------------- telemetry
+    def publish_state(self, now: float) -> None:
+        status = self.status
+        link = Link(
+            latency=status.latency, loss_fraction=status.loss_fraction,
+            staleness=status.staleness if math.isfinite(status.staleness) else now - self.started_at,
+            can_feedback_age=self.feedback_age if math.isfinite(self.feedback_age) else now - self.started_at,
+        )
+        v_used = self.out.v_used if self.out is not None and self.mode is Mode.RUNNING else self.v
+        self.state_seq += 1
+        try:
+            msg = robot_state(
+                self.state_seq, time.time(), self.q, v_used, self.out, self.loop.feasible, self.loop.sharing.bands,
+                self.tau, self.u_s, self.mode is Mode.ESTOPPED,
+                status.operator_id if not status.hands_off else None, link,
+            )
+            self.state_pub.put(encode_message(msg, self.dims))
+        except Exception as exc:  # noqa: BLE001 — telemetry must not stop the loop
+            self.emit(now, "telemetry", "info", "warning", f"RobotState not sent: {type(exc).__name__}: {exc}")
+
+    def publish_heartbeat(self) -> None:
+        self.heartbeat_seq += 1
+        try:
+            self.alive_pub.put(encode_message(Heartbeat(ROLE, self.config.robot_id, self.heartbeat_seq, time.time())))
+        except Exception:  # noqa: BLE001
+            pass
+
+    # --------------------------------------------------------------- shutdown
+    def shutdown(self) -> None:
+        """Zero torque, then IDLE to every axis (twice: a lost frame must not leave an axis armed)."""
+        self.tau, self.u_s = np.zeros(3), np.zeros(self.model.n)
+        for _ in range(2):
+            self.master.send_torques(self.tau)
+            self.master.idle_all()
+        self.emit(time.monotonic(), "shutdown", "info", "info", "controller stopping: zero torque, axes IDLE")

@@ -1,0 +1,91 @@
+"""Wheel odometry: pose and velocity of the omnidirectional robot from its wheel encoders.
+
+Pure: encoder estimates and their reception times in, (q, q̇) out; no clock, no bus.
+
+The encoders report wheel position (turns) and speed (turns/s), positive in the direction
+of positive ω_j (docs/services.md, "Units"). With ω = 2π·vel (rad/s) the body velocity is
+q̇ = B(ψ)⁻ᵀ ω (`OmniRobot.body_velocity_from_wheels`). The pose is integrated from the
+scenario's initial q with the wheel *angle increments* Δφ = 2π·Δpos between two updates,
+Δq = B(ψ_mid)⁻ᵀ Δφ at the mid-step yaw. That is the trapezoidal rule for q̇ = B(ψ)⁻ᵀ φ̇
+without needing a time base: a late or jittered update loses no distance, and the
+controller's clock and the drive's clock never have to agree. (`source="velocity"`
+integrates q̇ with the trapezoidal rule over the measured time step instead, for drives
+that report no position.)
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+TWO_PI = 2.0 * math.pi
+
+
+@dataclass
+class AxisEstimate:
+    """The latest encoder estimate of one wheel: turns, turns/s and when it arrived (s)."""
+
+    pos_turns: float
+    vel_turns_s: float
+    received: float
+
+
+@dataclass
+class WheelOdometry:
+    """Dead reckoning q, q̇ for an `OmniRobot` from the estimates of its wheels (in node order).
+
+    Call `update(estimates)` once per control period with the latest estimate of every wheel
+    (None for a wheel not heard from yet). The pose starts integrating once every wheel has
+    reported; until then it stays at the initial q.
+    """
+
+    model: object                      # OmniRobot: input_matrix, body_velocity_from_wheels
+    q0: np.ndarray
+    source: str = "position"           # "position" (angle increments) or "velocity" (trapezoid on q̇)
+    q: np.ndarray = field(init=False)
+    v: np.ndarray = field(init=False)
+    updates: int = field(init=False, default=0)
+    _last_pos: np.ndarray | None = field(init=False, default=None)
+    _last_time: float | None = field(init=False, default=None)
+
+    def __post_init__(self) -> None:
+        if self.source not in ("position", "velocity"):
+            raise ValueError(f"odometry source must be 'position' or 'velocity', got {self.source!r}")
+        self.q = np.asarray(self.q0, dtype=float).copy()
+        self.v = np.zeros_like(self.q)
+
+    def wheel_speeds(self, estimates) -> np.ndarray:
+        """ω (rad/s) = 2π · vel (turns/s)."""
+        return TWO_PI * np.array([e.vel_turns_s for e in estimates], dtype=float)
+
+    def update(self, estimates) -> tuple[np.ndarray, np.ndarray]:
+        """Advance with the latest estimates; returns (q, q̇) (copies)."""
+        if any(e is None for e in estimates):
+            return self.q.copy(), self.v.copy()
+        pos = np.array([e.pos_turns for e in estimates], dtype=float)
+        newest = max(e.received for e in estimates)
+        v_new = self.model.body_velocity_from_wheels(self.q, self.wheel_speeds(estimates))
+        if self._last_pos is not None:
+            if self.source == "position":
+                self.q = self._integrate_angles(TWO_PI * (pos - self._last_pos))
+            else:
+                dt = max(newest - self._last_time, 0.0)
+                self.q = self.q + 0.5 * dt * (self.v + v_new)
+            v_new = self.model.body_velocity_from_wheels(self.q, self.wheel_speeds(estimates))
+        self._last_pos, self._last_time = pos, newest
+        self.v = v_new
+        self.updates += 1
+        return self.q.copy(), self.v.copy()
+
+    def _integrate_angles(self, d_phi: np.ndarray) -> np.ndarray:
+        """Δq = B(ψ_mid)⁻ᵀ Δφ: one predictor pass for the yaw, then the midpoint."""
+        dq = self.model.body_velocity_from_wheels(self.q, d_phi)
+        mid = self.q + 0.5 * dq
+        dq = self.model.body_velocity_from_wheels(mid, d_phi)
+        return self.q + dq
+
+
+def feedback_ages(estimates, now: float) -> np.ndarray:
+    """Age (s) of each wheel's latest estimate; +inf for a wheel never heard from."""
+    return np.array([math.inf if e is None else max(now - e.received, 0.0) for e in estimates], dtype=float)

@@ -1,0 +1,162 @@
+"""Operator commands from the wire → the shared controller's `OperatorInput`, with the staleness policy.
+
+Pure: payload bytes and reception times in, `OperatorInput` out; the caller supplies the clock.
+
+* The joystick spring (44): u_h = k_p ∘ d with d the normalised deflection in [−1, 1];
+  the intent (45): v_h = ½ Σ_j k_p,j d_j².
+* The wish: q_d, q̇_d, q̈_d as sent (`sharedctl.transform.Desired`).
+* Ordering: per session, only a seq newer than the newest accepted one is taken; older and
+  duplicate seqs are ignored (and counted). A new session id starts its own sequence (an
+  operator restart); the most recently accepted command, of any session, is the current one.
+* Hands-off (u_h = 0, v_h = 0, wish held at the last q_d with zero rates) when the operator
+  has been silent for more than `timeout` (0.3 s), the deadman is released, or the last
+  payload was rejected (malformed or invalid: a `ProtocolError` from the decoder). Before
+  any command the wish is the current pose, hands-off.
+* `estop` in an accepted command latches `estop_requested` until `clear_estop()`.
+
+Nothing raised by the decoder escapes `offer`: every rejection is counted by reason.
+"""
+from __future__ import annotations
+
+import math
+from collections import Counter, deque
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from sharedctl.protocol.errors import ProtocolError
+from sharedctl.protocol.messages import ControlRequest, OperatorCommand
+from sharedctl.protocol.msgpack_codec import decode_message
+from sharedctl.protocol.wire_types import ROBOT_DIMS, Dims
+from sharedctl.shared_controller import OperatorInput
+from sharedctl.transform import Desired
+
+DEFAULT_TIMEOUT = 0.3   # s of operator silence before hands-off
+
+
+@dataclass(frozen=True)
+class OperatorStatus:
+    """What the policy decided at one instant (for telemetry and events)."""
+
+    hands_off: bool
+    reason: str                  # "active", "no_command", "stale", "deadman", "rejected"
+    staleness: float             # s since the last accepted command (inf before any)
+    latency: float               # s, receive time − send time of the last accepted command (0 if unknown)
+    loss_fraction: float         # seq gaps over the recent window of the current session
+    operator_id: str | None      # sender of the current command
+    estop_requested: bool
+
+
+@dataclass
+class OperatorInputPolicy:
+    """Turns received `OperatorCommand`s into the `OperatorInput` of every control period."""
+
+    kp: np.ndarray                           # joystick spring constant k_p per coordinate
+    timeout: float = DEFAULT_TIMEOUT
+    dims: Dims = ROBOT_DIMS
+    loss_window: int = 200                   # seqs over which the loss fraction is estimated
+    rejections: Counter = field(default_factory=Counter)
+    accepted: int = 0
+    current: OperatorCommand | None = None
+    received_at: float = -math.inf
+    latency: float = 0.0
+    last_rejected: bool = False
+    estop_requested: bool = False
+    take_requests: int = 0                   # accepted commands asking control_request = take
+    _newest_seq: dict = field(default_factory=dict)      # session_id → newest accepted seq
+    _recent: deque = field(default_factory=deque)        # seqs of the current session
+
+    def __post_init__(self) -> None:
+        self.kp = np.asarray(self.kp, dtype=float)
+
+    # ------------------------------------------------------------------ input
+    def offer(self, payload: bytes, now: float, wall_now: float | None = None) -> bool:
+        """Decode and judge one payload received at `now` (s, controller clock). True if accepted.
+
+        `wall_now` (s, same clock as the sender's `send_time`) gives the latency; None: unknown.
+        """
+        try:
+            command = decode_message(bytes(payload), self.dims, expect=OperatorCommand)
+        except ProtocolError as exc:
+            self.rejections[type(exc).__name__] += 1
+            self.last_rejected = True
+            return False
+        except Exception as exc:  # noqa: BLE001 — a bad payload never escapes a receive path
+            self.rejections[f"unexpected_{type(exc).__name__}"] += 1
+            self.last_rejected = True
+            return False
+        return self.accept(command, now, wall_now)
+
+    def accept(self, command: OperatorCommand, now: float, wall_now: float | None = None) -> bool:
+        """Apply the ordering policy to a decoded command."""
+        newest = self._newest_seq.get(command.session_id)
+        if newest is not None and command.seq <= newest:
+            self.rejections["duplicate_seq" if command.seq == newest else "out_of_order_seq"] += 1
+            return False
+        if self.current is None or command.session_id != self.current.session_id:
+            self._recent.clear()
+        self._newest_seq[command.session_id] = command.seq
+        self._recent.append(command.seq)
+        while len(self._recent) > self.loss_window:
+            self._recent.popleft()
+        self.current, self.received_at = command, now
+        self.accepted += 1
+        self.last_rejected = False
+        if wall_now is not None:
+            latency = wall_now - command.send_time
+            self.latency = latency if 0.0 <= latency < 60.0 else 0.0
+        if command.estop:
+            self.estop_requested = True
+        if command.control_request is ControlRequest.TAKE:
+            self.take_requests += 1
+        return True
+
+    def clear_estop(self) -> None:
+        self.estop_requested = False
+
+    # ----------------------------------------------------------------- output
+    def status(self, now: float) -> OperatorStatus:
+        staleness = now - self.received_at if self.current is not None else math.inf
+        if self.current is None:
+            reason = "no_command"
+        elif self.last_rejected:
+            reason = "rejected"
+        elif staleness > self.timeout:
+            reason = "stale"
+        elif not self.current.deadman:
+            reason = "deadman"
+        else:
+            reason = "active"
+        return OperatorStatus(
+            hands_off=reason != "active", reason=reason, staleness=staleness, latency=self.latency,
+            loss_fraction=self.loss_fraction(), operator_id=self.current.operator_id if self.current else None,
+            estop_requested=self.estop_requested,
+        )
+
+    def operator_input(self, now: float, pose: np.ndarray) -> tuple[OperatorInput, OperatorStatus]:
+        """The `OperatorInput` for the control period starting at `now`, robot at `pose`."""
+        status = self.status(now)
+        n = len(self.kp)
+        zero = np.zeros(n)
+        if self.current is None:
+            return OperatorInput(Desired(np.asarray(pose, float).copy(), zero, zero.copy()), zero.copy(), 0.0), status
+        cmd = self.current
+        q_d = np.asarray(cmd.q_d, dtype=float)
+        if status.hands_off:
+            return OperatorInput(Desired(q_d, zero, zero.copy()), zero.copy(), 0.0), status
+        deflection = np.asarray(cmd.joystick, dtype=float)
+        force = self.kp * deflection                                   # (44)
+        intent = 0.5 * float(np.sum(self.kp * deflection * deflection))  # (45)
+        desired = Desired(q_d, np.asarray(cmd.qd_d, dtype=float), np.asarray(cmd.qdd_d, dtype=float))
+        return OperatorInput(desired, force, intent), status
+
+    def loss_fraction(self) -> float:
+        """1 − received / span of seqs over the recent window of the current session."""
+        if len(self._recent) < 2:
+            return 0.0
+        span = self._recent[-1] - self._recent[0] + 1
+        return float(min(max(1.0 - len(self._recent) / span, 0.0), 1.0))
+
+    @property
+    def rejected(self) -> int:
+        return sum(self.rejections.values())

@@ -1,0 +1,125 @@
+"""Controller telemetry: the `RobotState` it publishes, and rate-limited `Event`s.
+
+Pure apart from the caller's clock values: builds wire messages from the control core's
+`StepOutput` and the daemon's link measurements.
+
+RobotState field mapping (see the daemon's docstring for where each value comes from):
+  q, qd_hat       odometry pose; the velocity the controller used (q̇ from the wheels, or
+                  the observer's v̂ for output feedback)
+  q_ref           StepOutput.q_r (the projected reference of the active group, or of the group
+                  the machine would pick); q when the core has none (NaN)
+  group_classes   one class per constraint group, `sharedctl.sets.classify_rows` on that group's
+                  rows x = K_g q + T_g, ẋ = K_g q̇ (first 16 groups)
+  active_group    StepOutput.group (None while the operator has authority)
+  authority       core `Authority` → wire `Authority` by name; k_s = 1 if HUMAN else 0
+  k_h, k_f        StepOutput.k_h, k_f
+  u_h, u_f, u_s   StepOutput (u_s is what was applied: zeros while arming or in estop)
+  wheel_torques   τ actually sent (after the torque-limit scaling)
+  theta_hat       StepOutput.theta_estimate
+  min_margin      FeasibleSet.margin(q); region_margins FeasibleSet.region_margins(q)
+  lease_holder    operator_id of the current command while the operator is not hands-off
+  link            latency from send_time, loss from seq gaps, staleness, oldest wheel feedback age
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from sharedctl.protocol.messages import Authority as WireAuthority
+from sharedctl.protocol.messages import Event, EventKind, LinkHealth, RobotState, Severity
+from sharedctl.protocol.messages import SetClass as WireSetClass
+from sharedctl.protocol.wire_types import MAX_GROUPS, MAX_REGIONS, MAX_TEXT_LEN
+from sharedctl.sets import classify_rows
+from sharedctl.sharing import Authority
+
+MAX_MS = 1.0e9   # a bound for "never" in the millisecond link fields (the wire needs finite values)
+
+
+def group_classes(feasible, bands, q: np.ndarray, v: np.ndarray) -> tuple[WireSetClass, ...]:
+    """Per-group class: `classify_rows` on each group's rows (x = K q + T, ẋ = K v)."""
+    return tuple(
+        WireSetClass[classify_rows(g.values(q), g.K @ v, bands).name] for g in feasible.groups[:MAX_GROUPS]
+    )
+
+
+def _finite(values, fallback) -> tuple[float, ...]:
+    arr = np.asarray(values, dtype=float)
+    if arr.shape != np.shape(fallback) or not np.all(np.isfinite(arr)):
+        arr = np.asarray(fallback, dtype=float)
+    return tuple(float(x) for x in arr)
+
+
+def _ms(seconds: float) -> float:
+    return MAX_MS if not math.isfinite(seconds) else float(min(max(seconds * 1e3, 0.0), MAX_MS))
+
+
+@dataclass(frozen=True)
+class Link:
+    latency: float          # s
+    loss_fraction: float
+    staleness: float        # s (inf: never heard)
+    can_feedback_age: float  # s (inf: never heard)
+
+
+def robot_state(
+    seq: int, time: float, q, v, out, feasible, bands, wheel_torques, u_s, estop_active: bool,
+    lease_holder: str | None, link: Link,
+) -> RobotState:
+    """A `RobotState` from the last `StepOutput` (`out`) and what the daemon measured."""
+    n = len(q)
+    zeros = np.zeros(n)
+    authority = out.authority if out is not None else Authority.HUMAN
+    group = out.group if out is not None and out.group is not None and out.group < MAX_GROUPS else None
+    return RobotState(
+        seq=seq, time=max(time, 0.0), q=_finite(q, zeros), qd_hat=_finite(v, zeros),
+        q_ref=_finite(out.q_r if out is not None else q, q),
+        group_classes=group_classes(feasible, bands, np.asarray(q, float), np.asarray(v, float)),
+        active_group=group, authority=WireAuthority[authority.name],
+        k_s=1.0 if authority is Authority.HUMAN else 0.0,
+        k_h=float(min(max(out.k_h, 0.0), 1.0)) if out is not None else 1.0,
+        k_f=float(min(max(out.k_f, 0.0), 1.0)) if out is not None else 0.0,
+        u_h=_finite(out.u_h if out is not None else zeros, zeros),
+        u_f=_finite(out.u_f if out is not None else zeros, zeros),
+        u_s=_finite(u_s, zeros),
+        wheel_torques=_finite(wheel_torques, np.zeros(len(wheel_torques))),
+        theta_hat=_finite(out.theta_estimate, np.zeros(len(out.theta_estimate))) if out is not None else (),
+        min_margin=float(np.clip(feasible.margin(np.asarray(q, float)), -1e12, 1e12)),
+        region_margins=tuple(float(np.clip(m, -1e12, 1e12)) for m in feasible.region_margins(np.asarray(q, float))[:MAX_REGIONS]),
+        estop_active=estop_active, lease_holder=lease_holder,
+        link=LinkHealth(
+            operator_latency_ms=_ms(link.latency), loss_fraction=float(min(max(link.loss_fraction, 0.0), 1.0)),
+            staleness_ms=_ms(link.staleness), can_feedback_age_ms=_ms(link.can_feedback_age),
+        ),
+    )
+
+
+@dataclass
+class EventLimiter:
+    """At most one event per `interval` seconds per topic; suppressed ones are counted and reported."""
+
+    interval: float = 1.0
+    source: str = "controller"
+    seq: int = 0
+    _last: dict = field(default_factory=dict)
+    _suppressed: dict = field(default_factory=dict)
+
+    def make(self, now: float, wall: float, topic: str, kind: str, severity: str, text: str) -> Event | None:
+        last = self._last.get(topic)
+        if last is not None and now - last < self.interval:
+            self._suppressed[topic] = self._suppressed.get(topic, 0) + 1
+            return None
+        self._last[topic] = now
+        skipped = self._suppressed.pop(topic, 0)
+        if skipped:
+            text = f"{text} (+{skipped} similar suppressed)"
+        self.seq += 1
+        return Event(
+            seq=self.seq, time=max(wall, 0.0), kind=EventKind(kind), severity=Severity(severity),
+            source=self.source, text=_clean(text)[:MAX_TEXT_LEN],
+        )
+
+
+def _clean(text: str) -> str:
+    return "".join(ch if ch.isprintable() or ch in "\t\n" else "?" for ch in text)
