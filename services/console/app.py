@@ -1,0 +1,248 @@
+"""The console process: telemetry in, operator commands out, a live dashboard on a terminal.
+
+Threads: Zenoh's callbacks store the latest RobotState and the events (`Telemetry`); a sender
+thread publishes one OperatorCommand every 1/rate s (`RateClock`); the main thread reads the
+keyboard and redraws the dashboard (5 Hz), so a slow redraw never delays a command.
+
+Script mode: the scenario's scripted operator drives; its clock starts when the first
+RobotState arrives (the controller is up), and nothing is sent before that. Keyboard mode:
+the virtual joystick drives (before the first RobotState its wish is around the scenario's
+initial pose). In both modes X/Esc requests an emergency stop and C clears the request.
+"""
+from __future__ import annotations
+
+import sys
+import threading
+import time
+from collections import deque
+from dataclasses import dataclass
+
+import numpy as np
+
+from sharedctl.protocol import keys
+from sharedctl.protocol.errors import ProtocolError
+from sharedctl.protocol.messages import Event, OperatorCommand, RobotState
+from sharedctl.protocol.msgpack_codec import decode_message, encode_message
+from sharedctl.protocol.wire_types import ROBOT_DIMS
+
+from ..lifecycle import RateClock, StopFlag
+from ..zenoh_session import open_session
+from .dashboard import DashboardView, map_size, render
+from .keyboard import VirtualJoystick, parse_keys
+from .map_view import MapFrame, background
+from .operator import CommandCounter, KeyboardCommandSource, ScriptedCommandSource
+from .terminal import KeyReader
+
+REDRAW_PERIOD = 0.2   # s
+KEYS_SCRIPT = "script drives · x/Esc estop · c clear estop · Ctrl-C quit"
+KEYS_KEYBOARD = "arrows/WASD move · q/e yaw · space deadman · x/Esc estop · c clear · t/r take/release · Ctrl-C quit"
+
+
+@dataclass
+class ConsoleOptions:
+    scenario: object                 # sharedctl.scenario.Scenario (map, initial pose, script)
+    script: bool = False
+    headless: bool = True
+    duration: float | None = None    # s, stop by itself after this long
+    listen: list[str] | None = None
+    connect: list[str] | None = None
+    robot_id: str = "robot1"
+    operator_id: str = "operator"
+    rate: float = 50.0               # Hz
+    deadman_mode: str = "toggle"
+
+
+class Telemetry:
+    """Latest RobotState and recent events, filled by Zenoh callbacks (any thread)."""
+
+    def __init__(self) -> None:
+        self.lock = threading.Lock()
+        self.state: RobotState | None = None
+        self.state_arrival: float | None = None     # monotonic s
+        self.first_arrival: float | None = None
+        self.states = 0
+        self.events: deque = deque(maxlen=6)
+        self.event_count = 0
+        self.rejected = 0
+        self.trail: deque = deque(maxlen=400)
+
+    def on_state(self, sample) -> None:
+        try:
+            state = decode_message(sample.payload.to_bytes(), ROBOT_DIMS, expect=RobotState)
+        except ProtocolError:
+            with self.lock:
+                self.rejected += 1
+            return
+        now = time.monotonic()
+        with self.lock:
+            if self.first_arrival is None:
+                self.first_arrival = now
+            self.state, self.state_arrival = state, now
+            self.states += 1
+            if not self.trail or np.hypot(state.q[0] - self.trail[-1][0], state.q[1] - self.trail[-1][1]) > 0.02:
+                self.trail.append((state.q[0], state.q[1]))
+
+    def on_event(self, sample) -> None:
+        try:
+            event = decode_message(sample.payload.to_bytes(), ROBOT_DIMS, expect=Event)
+        except ProtocolError:
+            with self.lock:
+                self.rejected += 1
+            return
+        with self.lock:
+            self.events.append(event)
+            self.event_count += 1
+
+
+class ConsoleApp:
+    def __init__(self, options: ConsoleOptions) -> None:
+        self.options = options
+        loop, q0, _ = options.scenario.closed_loop()
+        self.loop, self.q0 = loop, np.asarray(q0, float)
+        counter = CommandCounter(operator_id=options.operator_id)
+        self.script = ScriptedCommandSource(loop.human, counter) if options.script else None
+        self.keyboard = KeyboardCommandSource(VirtualJoystick(deadman_mode=options.deadman_mode), counter)
+        self.telemetry = Telemetry()
+        self.lock = threading.Lock()          # guards the joystick and `last_command`
+        self.last_command: OperatorCommand | None = None
+        self.sent = 0
+        self.publish_errors = 0
+
+    # ----- commands ---------------------------------------------------------
+    def next_command(self, now: float) -> OperatorCommand | None:
+        """The command to send at monotonic time `now` (None: nothing to send yet)."""
+        with self.telemetry.lock:
+            state, first = self.telemetry.state, self.telemetry.first_arrival
+        with self.lock:
+            if self.script is not None:
+                if state is None:
+                    return None
+                return self.script.command(now - first, state, estop=self.keyboard.joystick.estop)
+            pose = self.q0 if state is None else np.asarray(state.q, float)
+            return self.keyboard.command(now, pose)
+
+    def sender(self, publisher, stop: StopFlag) -> None:
+        clock = RateClock(1.0 / self.options.rate)
+        while not stop.stopped:
+            command = self.next_command(time.monotonic())
+            if command is not None:
+                try:
+                    publisher.put(encode_message(command, ROBOT_DIMS))
+                    self.sent += 1
+                except Exception:  # noqa: BLE001 — a failed put must not end the operator loop
+                    self.publish_errors += 1
+                with self.lock:
+                    self.last_command = command
+            clock.wait()
+
+    # ----- the dashboard ----------------------------------------------------
+    def map_points(self) -> list:
+        points = [self.q0[:2]]
+        duration = self.options.scenario.duration
+        points += [self.loop.human.desired(t).q[:2] for t in np.linspace(0.0, duration, 41)]
+        return points
+
+    def view(self, frame: MapFrame, grid) -> DashboardView:
+        tel = self.telemetry
+        now = time.monotonic()
+        with tel.lock:
+            state, arrival, first = tel.state, tel.state_arrival, tel.first_arrival
+            view = DashboardView(
+                title=f"sharedctl console · {self.options.robot_id} · {self.options.scenario.name}",
+                mode="script" if self.script else "keyboard", state=state,
+                state_age=None if arrival is None else now - arrival, states_received=tel.states,
+                events=deque(tel.events, maxlen=6), trail=deque(tel.trail, maxlen=400), frame=frame, grid=grid,
+                keys_help=KEYS_SCRIPT if self.script else KEYS_KEYBOARD,
+            )
+        with self.lock:
+            view.command = self.last_command
+        if self.script is not None and first is not None:
+            view.script_time = now - first
+        return view
+
+    # ----- the process ------------------------------------------------------
+    def run(self, stop: StopFlag, interactive: bool, out=None) -> int:
+        out = out if out is not None else sys.stdout
+        opts = self.options
+        start = time.monotonic()
+        session = open_session(opts.listen, opts.connect)
+        live = None
+        try:
+            subscribers = [
+                session.declare_subscriber(keys.state_key(opts.robot_id), self.telemetry.on_state),
+                session.declare_subscriber(keys.events_key(opts.robot_id), self.telemetry.on_event),
+            ]
+            publisher = session.declare_publisher(keys.operator_cmd_key(opts.robot_id))
+            sender = threading.Thread(target=self.sender, args=(publisher, stop), name="operator-sender", daemon=True)
+            sender.start()
+            with KeyReader() if interactive else _NoKeys() as reader:
+                if interactive:
+                    live = self._start_live()
+                frame, grid, grid_yaw = None, None, 0.0
+                next_draw = 0.0
+                while not stop.stopped:
+                    now = time.monotonic()
+                    if opts.duration is not None and now - start >= opts.duration:
+                        break
+                    typed = reader.read()
+                    if typed:
+                        with self.lock:
+                            self.keyboard.joystick.press_all(parse_keys(typed), now)
+                    if live is not None and now >= next_draw:
+                        frame, grid, grid_yaw = self._map(live, frame, grid, grid_yaw)
+                        live.update(render(self.view(frame, grid)), refresh=True)
+                        next_draw = now + REDRAW_PERIOD
+                    stop.wait(0.02)
+                stop.stop()
+                if live is not None:
+                    live.stop()
+                    live = None
+            sender.join(timeout=1.0)
+            for sub in subscribers:
+                sub.undeclare()
+            publisher.undeclare()
+        finally:
+            stop.stop()
+            if live is not None:
+                live.stop()
+            session.close()
+        tel = self.telemetry
+        last = "none" if tel.state is None else f"seq {tel.state.seq} t={tel.state.time:.2f} s"
+        print(f"sharedctl console: {'script' if self.script else 'keyboard'} {opts.robot_id}: "
+              f"sent {self.sent} commands in {time.monotonic() - start:.1f} s, received {tel.states} states "
+              f"(last {last}), {tel.event_count} events, {tel.rejected} rejected", file=out, flush=True)
+        return 0
+
+    def _start_live(self):
+        from rich.console import Console
+        from rich.live import Live
+
+        live = Live(console=Console(), screen=True, auto_refresh=False, transient=True)
+        live.start()
+        return live
+
+    def _map(self, live, frame, grid, grid_yaw):
+        """(Re)build the map when the screen size changes, the robot leaves it or the yaw turns."""
+        size = live.console.size
+        cols, rows = map_size(size.width, size.height)
+        with self.telemetry.lock:
+            state = self.telemetry.state
+        yaw = 0.0 if state is None or len(state.q) < 3 else float(state.q[2])
+        robot_out = state is not None and frame is not None and frame.cell(state.q[0], state.q[1]) is None
+        if frame is None or (frame.cols, frame.rows) != (cols, rows) or robot_out:
+            points = self.map_points() + ([] if state is None else [state.q[:2]])
+            frame, grid = MapFrame.around(points, cols, rows), None
+        if grid is None or abs(yaw - grid_yaw) > 0.1:
+            grid, grid_yaw = background(self.loop.feasible, frame, yaw, self.q0), yaw
+        return frame, grid, grid_yaw
+
+
+class _NoKeys:
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        return None
+
+    def read(self) -> str:
+        return ""

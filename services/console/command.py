@@ -1,0 +1,56 @@
+"""`sharedctl console [--script SCENARIO] [--headless] [--duration S] [--zenoh-connect EP | --zenoh-listen EP]
+[--robot-id ID] [--scenario FILE]` — the operator console (docs/console.md)."""
+from __future__ import annotations
+
+import sys
+
+from sharedctl.protocol.errors import KeyExprError
+from sharedctl.scenario import ScenarioError
+
+from ..lifecycle import StopFlag
+from ..scenario_files import load
+from ..zenoh_session import DEFAULT_ENDPOINT, EndpointError
+
+
+def add_parser(subparsers) -> None:
+    p = subparsers.add_parser("console", help="operator console: live dashboard, keyboard joystick or scripted operator")
+    which = p.add_mutually_exclusive_group()
+    which.add_argument("--script", metavar="SCENARIO", help="the scenario's scripted operator drives (file or packaged name)")
+    which.add_argument("--scenario", metavar="FILE", help="scenario for the map and initial pose in keyboard mode (default paper_convex)")
+    p.add_argument("--headless", action="store_true", help="no dashboard, no keyboard; print one line at the end")
+    p.add_argument("--duration", type=float, metavar="S", help="stop after S seconds (default: until SIGINT/SIGTERM)")
+    link = p.add_mutually_exclusive_group()
+    link.add_argument("--zenoh-connect", metavar="EP", help=f"connect to a loopback endpoint (default {DEFAULT_ENDPOINT})")
+    link.add_argument("--zenoh-listen", metavar="EP", help="listen on a loopback endpoint instead")
+    p.add_argument("--robot-id", default="robot1", help="robot id in the key expressions (default robot1)")
+    p.add_argument("--operator-id", default="operator", help="operator id sent with every command")
+    p.add_argument("--rate", type=float, default=50.0, metavar="HZ", help="command rate (default 50)")
+    p.add_argument("--deadman", choices=("toggle", "hold"), default="toggle",
+                   help="space toggles the deadman, or holds it while the key repeats (default toggle)")
+    p.set_defaults(handler=run)
+
+
+def run(args) -> int:
+    from .app import ConsoleApp, ConsoleOptions
+
+    stop = StopFlag().install()
+    try:
+        scenario = load(args.scenario or args.script or "paper_convex")
+    except ScenarioError as exc:
+        print(f"sharedctl console: {exc}", file=sys.stderr)
+        return 2
+    if args.rate <= 0 or (args.duration is not None and args.duration <= 0):
+        print("sharedctl console: --rate and --duration must be positive", file=sys.stderr)
+        return 2
+    interactive = not args.headless and sys.stdin.isatty() and sys.stdout.isatty()
+    options = ConsoleOptions(
+        scenario=scenario, script=args.script is not None, headless=not interactive, duration=args.duration,
+        listen=[args.zenoh_listen] if args.zenoh_listen else None,
+        connect=None if args.zenoh_listen else [args.zenoh_connect or DEFAULT_ENDPOINT],
+        robot_id=args.robot_id, operator_id=args.operator_id, rate=args.rate, deadman_mode=args.deadman,
+    )
+    try:
+        return ConsoleApp(options).run(stop, interactive)
+    except (EndpointError, KeyExprError) as exc:
+        print(f"sharedctl console: {exc}", file=sys.stderr)
+        return 2
