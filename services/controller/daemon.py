@@ -95,6 +95,8 @@ class Summary:
     jitter_p99_ms: float = 0.0
     jitter_max_ms: float = 0.0
     cpu_percent: float = 0.0
+    compute_p50_ms: float = 0.0
+    compute_p99_ms: float = 0.0
     frames_rx: int = 0
     frames_tx: int = 0
     bad_frames: int = 0
@@ -110,7 +112,8 @@ class Summary:
         return (
             f"sharedctl controller: stopped after {self.elapsed:.1f} s: {self.ticks} ticks at {self.rate:.1f} Hz, "
             f"{self.missed} missed / {self.late} late deadlines, jitter p50 {self.jitter_p50_ms:.3f} ms "
-            f"p99 {self.jitter_p99_ms:.3f} ms max {self.jitter_max_ms:.2f} ms, CPU {self.cpu_percent:.0f}% of one core; "
+            f"p99 {self.jitter_p99_ms:.3f} ms max {self.jitter_max_ms:.2f} ms, compute p50 {self.compute_p50_ms:.3f} ms "
+            f"p99 {self.compute_p99_ms:.3f} ms, CPU {self.cpu_percent:.0f}% of one core; "
             f"CAN frames rx {self.frames_rx} tx {self.frames_tx} bad {self.bad_frames}; operator commands "
             f"{self.commands_accepted} accepted, {rej} rejected{f' ({detail})' if detail else ''}; "
             f"estops {self.estops}, torque-limited ticks {self.saturated}"
@@ -153,7 +156,8 @@ class ControllerDaemon:
         self.last_authority = None
         self.last_hands_off_reason = None
         self.last_rejected = 0
-        self.histogram = LatenessHistogram()
+        self.histogram = LatenessHistogram()     # tick lateness (jitter)
+        self.compute = LatenessHistogram()       # tick compute time (control + telemetry)
         self.late = 0
         self._declare(session)
 
@@ -208,6 +212,7 @@ class ControllerDaemon:
                 self.histogram.add(lateness)
                 if lateness > 0.5 * self.period:
                     self.late += 1
+                self.master.receive_until(0.0)    # whatever arrived while this process was not running
                 now = time.monotonic()
                 if config.duration is not None and now - t0 >= config.duration:
                     break
@@ -217,6 +222,7 @@ class ControllerDaemon:
                 if ticks % heartbeat_every == 0:
                     self.publish_heartbeat()
                 ticks += 1
+                self.compute.add(time.monotonic() - now)
                 self.master.receive_until(clock.next - 2e-4)
         finally:
             self.shutdown()
@@ -226,7 +232,9 @@ class ControllerDaemon:
             ticks=ticks, elapsed=elapsed, rate=ticks / elapsed if elapsed > 0 else 0.0, missed=clock.missed,
             late=self.late, jitter_p50_ms=self.histogram.quantile(0.5) * 1e3,
             jitter_p99_ms=self.histogram.quantile(0.99) * 1e3, jitter_max_ms=self.histogram.max * 1e3,
-            cpu_percent=100.0 * cpu / elapsed if elapsed > 0 else 0.0, frames_rx=self.master.rx_frames,
+            cpu_percent=100.0 * cpu / elapsed if elapsed > 0 else 0.0,
+            compute_p50_ms=self.compute.quantile(0.5) * 1e3, compute_p99_ms=self.compute.quantile(0.99) * 1e3,
+            frames_rx=self.master.rx_frames,
             frames_tx=self.master.tx_frames, bad_frames=self.master.bad_frame_count,
             commands_accepted=self.policy.accepted, rejections=dict(self.policy.rejections), estops=self.estops,
             saturated=self.saturated, mode=self.mode.value,
@@ -334,6 +342,7 @@ class ControllerDaemon:
                 self.state_seq, time.time(), self.q, v_used, self.out, self.loop.feasible, self.loop.sharing.bands,
                 self.tau, self.u_s, self.mode is Mode.ESTOPPED,
                 status.operator_id if not status.hands_off else None, link,
+                self.out.theta_estimate if self.out is not None else self.state.theta_hat,
             )
             self.state_pub.put(encode_message(msg, self.dims))
         except Exception as exc:  # noqa: BLE001 — telemetry must not stop the loop

@@ -15,7 +15,7 @@ RobotState field mapping (see the daemon's docstring for where each value comes 
   k_h, k_f        StepOutput.k_h, k_f
   u_h, u_f, u_s   StepOutput (u_s is what was applied: zeros while arming or in estop)
   wheel_torques   τ actually sent (after the torque-limit scaling)
-  theta_hat       StepOutput.theta_estimate
+  theta_hat       StepOutput.theta_estimate (the scenario's θ̂0 before the first step)
   min_margin      FeasibleSet.margin(q); region_margins FeasibleSet.region_margins(q)
   lease_holder    operator_id of the current command while the operator is not hands-off
   link            latency from send_time, loss from seq gaps, staleness, oldest wheel feedback age
@@ -65,7 +65,7 @@ class Link:
 
 def robot_state(
     seq: int, time: float, q, v, out, feasible, bands, wheel_torques, u_s, estop_active: bool,
-    lease_holder: str | None, link: Link,
+    lease_holder: str | None, link: Link, theta_hat,
 ) -> RobotState:
     """A `RobotState` from the last `StepOutput` (`out`) and what the daemon measured."""
     n = len(q)
@@ -84,7 +84,7 @@ def robot_state(
         u_f=_finite(out.u_f if out is not None else zeros, zeros),
         u_s=_finite(u_s, zeros),
         wheel_torques=_finite(wheel_torques, np.zeros(len(wheel_torques))),
-        theta_hat=_finite(out.theta_estimate, np.zeros(len(out.theta_estimate))) if out is not None else (),
+        theta_hat=_finite(theta_hat, np.zeros(len(theta_hat))),
         min_margin=float(np.clip(feasible.margin(np.asarray(q, float)), -1e12, 1e12)),
         region_margins=tuple(float(np.clip(m, -1e12, 1e12)) for m in feasible.region_margins(np.asarray(q, float))[:MAX_REGIONS]),
         estop_active=estop_active, lease_holder=lease_holder,
