@@ -2,7 +2,7 @@
 
     sharedctl controller [--scenario FILE|name] [--controller ce|nce|of]
                          [--can-interface I --can-channel C --can-option k=v …]
-                         [--zenoh-listen EP | --zenoh-connect EP] [--robot-id ID]
+                         [--zenoh-listen EP]… [--zenoh-connect EP]… [--robot-id ID]
                          [--rate 500] [--telemetry-rate 50] [--torque-limit 60] [--duration S]
 """
 from __future__ import annotations
@@ -26,9 +26,12 @@ def add_parser(subparsers) -> None:
     p.add_argument("--scenario", default="paper_convex", help="scenario TOML file or packaged name (default: paper_convex)")
     p.add_argument("--controller", choices=("ce", "nce", "of"), help="machine law (default: the scenario's, else ce)")
     can_bus.add_arguments(p)
-    z = p.add_mutually_exclusive_group()
-    z.add_argument("--zenoh-listen", metavar="EP", help=f"listen on this loopback endpoint (default {zenoh_session.DEFAULT_ENDPOINT})")
-    z.add_argument("--zenoh-connect", metavar="EP", help="connect to a peer listening on this loopback endpoint")
+    p.add_argument("--zenoh-listen", metavar="EP", action="append",
+                   help=f"listen on this loopback endpoint (repeatable; default {zenoh_session.DEFAULT_ENDPOINT} "
+                        "unless --zenoh-connect is given)")
+    p.add_argument("--zenoh-connect", metavar="EP", action="append",
+                   help="connect to a peer listening on this loopback endpoint (repeatable; peers do not forward "
+                        "for each other: connect to every peer whose data you need, or let them connect to you)")
     p.add_argument("--robot-id", default="robot1", help="robot id in the key expressions (default robot1)")
     p.add_argument("--rate", type=float, default=500.0, help="control loop rate, Hz (default 500)")
     p.add_argument("--telemetry-rate", type=float, default=50.0, help="RobotState rate, Hz (default 50)")
@@ -48,8 +51,8 @@ def run(args) -> int:
         scenario = load(args.scenario)
         loop, q0, _ = scenario.closed_loop(args.controller)
         spec = can_bus.spec_from_args(args)
-        listen = [args.zenoh_listen] if args.zenoh_listen else ([] if args.zenoh_connect else [zenoh_session.DEFAULT_ENDPOINT])
-        connect = [args.zenoh_connect] if args.zenoh_connect else []
+        connect = list(args.zenoh_connect or [])
+        listen = list(args.zenoh_listen or ([] if connect else [zenoh_session.DEFAULT_ENDPOINT]))
         zenoh_session.config(listen, connect)   # validates the endpoints before anything opens
     except (ScenarioError, KeyExprError, ValueError) as exc:
         print(f"{PROG}: {exc}", file=sys.stderr)
@@ -63,7 +66,7 @@ def run(args) -> int:
         bus = can_bus.open_bus(spec)
         session = zenoh_session.open_session(listen, connect)
         daemon = ControllerDaemon(config, loop, q0, bus, session)
-        zenoh_desc = f"listen {listen[0]}" if listen else f"connect {connect[0]}"
+        zenoh_desc = " ".join([f"listen {e}" for e in listen] + [f"connect {e}" for e in connect])
         print(
             f"{PROG}: robot {robot_id}, scenario {scenario.name}, controller {loop.controller.name}, "
             f"{config.rate:g} Hz (telemetry {config.telemetry_rate:g} Hz), torque limit {config.torque_limit:g} N·m, "
