@@ -1,0 +1,93 @@
+"""The robot simulation without wires: axes on the plant, frame schedule, watchdog → coasting."""
+from __future__ import annotations
+
+from collections import Counter
+
+import pytest
+
+from sharedctl.models import OmniRobot
+from sharedctl.protocol import cansimple as cs
+from sharedctl.protocol.odrive_enums import AxisState, CommandId, ControlMode, InputMode, ODriveError
+from sharedctl.services.robot.plant import RobotSimConfig
+from sharedctl.services.robot.simulation import MAX_CATCH_UP_STEPS, RobotSimulation, is_own_direction
+
+Q0 = [-0.9, 3.0, 0.0]
+
+
+def simulation(**config) -> RobotSimulation:
+    return RobotSimulation(OmniRobot(), RobotSimConfig(**config), Q0, [0.0, 0.0, 0.0])
+
+
+def arm(sim: RobotSimulation, now: float) -> None:
+    for node in (0, 1, 2):
+        sim.receive(cs.ClearErrors(node), now)
+        sim.receive(cs.SetControllerMode(node, ControlMode.TORQUE_CONTROL, InputMode.PASSTHROUGH), now)
+        sim.receive(cs.SetAxisState(node, AxisState.CLOSED_LOOP_CONTROL), now)
+
+
+def run(sim, start, seconds, torque=None):
+    """Advance at 1 kHz ticks; feed torque to every axis each tick when given. Returns the frames sent."""
+    frames = []
+    for k in range(1, int(round(seconds * 1000)) + 1):
+        now = start + k * 1e-3
+        if torque is not None:
+            for node in (0, 1, 2):
+                sim.receive(cs.SetInputTorque(node, torque), now)
+        frames += sim.advance(now)
+    return frames
+
+
+def test_cyclic_frames_default_to_heartbeat_10_hz_and_encoder_500_hz_per_axis():
+    counts = Counter((type(f).__name__, f.node_id) for f in run(simulation(), 0.0, 1.0))
+    for node in (0, 1, 2):
+        assert counts[("Heartbeat", node)] == pytest.approx(10, abs=1)
+        assert counts[("GetEncoderEstimates", node)] == pytest.approx(500, abs=1)
+
+
+def test_the_robot_ignores_only_the_drive_to_host_direction():
+    for frame, own in ((cs.Heartbeat(0), True), (cs.GetEncoderEstimates(1, 0.0, 0.0), True),
+                       (cs.SetInputTorque(0, 1.0), False), (cs.Estop(2), False),
+                       (cs.PollRequest(0, CommandId.GET_ENCODER_ESTIMATES), False)):
+        f = cs.encode(frame)
+        assert is_own_direction(f.arbitration_id, f.is_remote) is own
+
+
+def test_armed_torque_turns_the_wheels_forwards():
+    sim = simulation()
+    arm(sim, 0.0)
+    run(sim, 0.0, 0.5, torque=0.3)
+    assert all(axis.vel_turns_s > 0.5 and axis.pos_turns > 0.05 for axis in sim.axes)
+    assert sim.state.qd[2] > 0                          # equal wheel torques: positive yaw rate
+
+
+def test_watchdog_trip_leaves_the_robot_coasting_to_rest():
+    sim = simulation()
+    arm(sim, 0.0)
+    run(sim, 0.0, 0.5, torque=0.3)
+    run(sim, 0.5, 0.11)                                 # silence
+    assert all(axis.state == AxisState.IDLE and axis.errors == ODriveError.WATCHDOG_TIMER_EXPIRED for axis in sim.axes)
+    assert sim.watchdog_trips == 3
+    assert sim.applied_torques() == [0.0, 0.0, 0.0]
+    run(sim, 0.61, 3.0)
+    assert all(abs(axis.vel_turns_s) < 1e-3 for axis in sim.axes)
+
+
+def test_late_command_after_expiry_does_not_revive_the_axis():
+    sim = simulation()
+    arm(sim, 0.0)
+    sim.receive(cs.SetInputTorque(0, 0.3), 0.5)       # 0.5 s after arming, no advance() in between
+    assert sim.axes[0].errors == ODriveError.WATCHDOG_TIMER_EXPIRED
+    assert sim.applied_torques()[0] == 0.0
+
+
+def test_a_long_stall_is_skipped_not_replayed():
+    sim = simulation()
+    sim.advance(1.0)
+    assert sim.steps == MAX_CATCH_UP_STEPS
+    assert sim.time == pytest.approx(1.0)
+    assert sim.skipped_time == pytest.approx(1.0 - MAX_CATCH_UP_STEPS * 1e-3)
+
+
+def test_frames_for_other_nodes_are_ignored():
+    sim = simulation()
+    assert sim.receive(cs.PollRequest(7, CommandId.GET_TORQUES), 0.0) == []
