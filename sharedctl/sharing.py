@@ -115,11 +115,14 @@ def _clear_of_faces(feasible: FeasibleSet, group: int | None, q: np.ndarray, ban
     return bool(np.all(feasible.groups[group].values(q) <= -bands.b1))
 
 
-def select_group(feasible: FeasibleSet, situation: Situation, lyapunov) -> int | None:
+def select_group(feasible: FeasibleSet, situation: Situation, lyapunov, reference=None) -> int | None:
     """Least-Lyapunov group among those that apply and cover their polytope's hazardous rows.
 
     `lyapunov(g)` gives the selection value of group g. If no group covers every hazardous
-    row (a corridor narrower than the bands), the one covering most rows wins.
+    row (a corridor narrower than the bands), the one covering most rows wins. With
+    `reference` (the groups' projected references q_r, G×n), groups whose q_r lies inside
+    their whole polytope are preferred: a group's projection only respects its own n rows, and
+    the machine should not be led towards a face its group does not contain.
     """
     best, best_key = None, None
     for g, grp in enumerate(feasible.groups):
@@ -130,7 +133,10 @@ def select_group(feasible: FeasibleSet, situation: Situation, lyapunov) -> int |
         value = lyapunov(g)
         if not math.isfinite(value):
             continue
-        key = (missed, value)
+        outside = 0
+        if reference is not None:
+            outside = int(not np.all(feasible.regions[grp.region].values(reference[g]) <= 0.0))
+        key = (missed, outside, value)
         if best_key is None or key < best_key:
             best, best_key = g, key
     return best
@@ -145,11 +151,13 @@ def arbitrate(
     intent: float,
     dt: float,
     lyapunov,
+    reference: np.ndarray | None = None,
 ) -> tuple[ArbiterState, Decision]:
     """One sample of the sharing function: classify, latch, select, blend.
 
     `v` is the measured velocity (state feedback, (46)) or the observer's v̂ (output
-    feedback, (47)). `intent` is v_h of (45). `lyapunov(g)` is evaluated lazily.
+    feedback, (47)). `intent` is v_h of (45). `lyapunov(g)` is evaluated lazily; `reference`
+    holds every group's projected reference (see select_group).
     """
     situation = classify(feasible, q, v, params.bands)
     overall = situation.overall
@@ -195,7 +203,7 @@ def arbitrate(
             and situation.hazard_rows.get(feasible.groups[group].region)
         )
         if stale:
-            chosen = select_group(feasible, situation, lyapunov)
+            chosen = select_group(feasible, situation, lyapunov, reference)
             if chosen is not None:
                 group = chosen
     group_changed = group != state.group

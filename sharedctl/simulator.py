@@ -192,7 +192,7 @@ def simulate(loop: ClosedLoop, q0, v0, duration: float, dt: float) -> Trace:
         v_meas = velocity_for_control(q, v, obs)
         intent = 0.0 if loop.sharing.mode is Mode.MACHINE else human.command(t, q, v).intent
         q_r_all, values = all_groups(feasible.stack, q, v_meas, desired, loop.reference, ctrl.tracking.lam)
-        arbiter, decision = arbitrate(feasible, loop.sharing, arbiter, q, v_meas, intent, dt, values.__getitem__)
+        arbiter, decision = arbitrate(feasible, loop.sharing, arbiter, q, v_meas, intent, dt, values.__getitem__, q_r_all)
         engaged = decision.authority is not Authority.HUMAN and decision.group is not None
         if engaged and (not engaged_before or decision.group_changed or decision.role_changed or law is None):
             if law is not None and law_state.size:
@@ -213,7 +213,7 @@ def simulate(loop: ClosedLoop, q0, v0, duration: float, dt: float) -> Trace:
             k += 1
             break
         u_h, u_f, u_s, v_meas, desired = signals
-        ref_group = decision.group if engaged else select_group(feasible, decision.situation, values.__getitem__)
+        ref_group = decision.group if engaged else select_group(feasible, decision.situation, values.__getitem__, q_r_all)
         q_r = q_r_all[ref_group] if ref_group is not None else np.full(n, np.nan)
         estimate = law.estimate(theta_hat, law_state) if (law is not None and law_state.size) else theta_hat
         rec.put(
