@@ -130,6 +130,23 @@ class FeasibleSet:
     def region_margins(self, q: np.ndarray) -> np.ndarray:
         return np.array([r.margin(q) for r in self.regions])
 
+    def reference_inside(self, points: np.ndarray) -> np.ndarray:
+        """For G points (one per group), is point g inside group g's own polytope?"""
+        out = np.zeros(len(self.groups), dtype=bool)
+        for r, region in enumerate(self.regions):
+            members = self._members[r]
+            out[members] = np.all(points[members] @ region.K.T + region.T <= 0.0, axis=1)
+        return out
+
+    @property
+    def _members(self) -> list[np.ndarray]:
+        cached = self.__dict__.get("_members_cache")
+        if cached is None:
+            cached = [np.array([g for g, grp in enumerate(self.groups) if grp.region == r], dtype=int)
+                      for r in range(len(self.regions))]
+            object.__setattr__(self, "_members_cache", cached)
+        return cached
+
     def applicable_groups(self, q: np.ndarray) -> list[int]:
         """Groups whose polytope contains q ("which groups apply here")."""
         inside = set(self.containing_regions(q))

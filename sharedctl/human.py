@@ -36,7 +36,7 @@ class LineTrajectory(Trajectory):
     velocity: np.ndarray
 
     def sample(self, t):
-        return Desired(self.start + self.velocity * t, self.velocity.copy(), np.zeros_like(self.start))
+        return Desired(self.start + self.velocity * t, self.velocity, np.zeros(self.start.size))
 
 
 @dataclass(frozen=True)
@@ -80,7 +80,7 @@ class HumanCommand:
 
 def intent(kp: np.ndarray, deflection: np.ndarray) -> float:
     """v_h = ½ k_p |q̂_h|² (45)."""
-    return 0.5 * float(np.sum(kp * deflection * deflection))
+    return 0.5 * float(kp @ (deflection * deflection))
 
 
 class HumanModel(ABC):
@@ -90,9 +90,13 @@ class HumanModel(ABC):
     def desired(self, t: float) -> Desired:
         return self.trajectory.sample(t)
 
-    @abstractmethod
     def command(self, t: float, q: np.ndarray, v: np.ndarray) -> HumanCommand:
-        ...
+        """The operator's deflection, force and intent at time t for the robot state (q, q̇)."""
+        return self.command_from(t, self.desired(t), q, v)
+
+    @abstractmethod
+    def command_from(self, t: float, desired: Desired, q: np.ndarray, v: np.ndarray) -> HumanCommand:
+        """Same as command(), with the wish at t already sampled."""
 
 
 @dataclass(frozen=True)
@@ -102,8 +106,8 @@ class JoystickSpring(HumanModel):
     trajectory: Trajectory
     kp: np.ndarray
 
-    def command(self, t, q, v):
-        d = self.desired(t).q - q
+    def command_from(self, t, desired, q, v):
+        d = desired.q - q
         return HumanCommand(d, self.kp * d, intent(self.kp, d))
 
 
@@ -119,9 +123,8 @@ class ScriptedOperator(HumanModel):
     kp: np.ndarray
     kd: np.ndarray
 
-    def command(self, t, q, v):
-        s = self.desired(t)
-        d = (s.q - q) + (self.kd / self.kp) * (s.q_dot - v)
+    def command_from(self, t, desired, q, v):
+        d = (desired.q - q) + (self.kd / self.kp) * (desired.q_dot - v)
         return HumanCommand(d, self.kp * d, intent(self.kp, d))
 
 
@@ -138,7 +141,7 @@ class ArbitraryOperator(HumanModel):
     times: np.ndarray | None = None
     forces: np.ndarray | None = None
 
-    def command(self, t, q, v):
+    def command_from(self, t, desired, q, v):
         if self.function is not None:
             u = np.asarray(self.function(t, q, v), dtype=float)
         else:

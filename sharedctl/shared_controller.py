@@ -84,7 +84,8 @@ class SharedController:
         mode = self.sharing.mode
         intent = 0.0 if mode is Mode.MACHINE else operator.intent
         q_r_all, values = all_groups(feasible.stack, q, v_used, operator.desired, self.reference, machine.tracking.lam)
-        arbiter, decision = arbitrate(feasible, self.sharing, state.arbiter, q, v_used, intent, dt, values.__getitem__, q_r_all)
+        ref_ok = feasible.reference_inside(q_r_all)
+        arbiter, decision = arbitrate(feasible, self.sharing, state.arbiter, q, v_used, intent, dt, values.__getitem__, ref_ok)
 
         theta_hat, law_role, law_state = state.theta_hat, state.law_role, state.law_state
         engaged = decision.authority is not Authority.HUMAN and decision.group is not None
@@ -123,7 +124,7 @@ class SharedController:
             u_s = decision.k_h * u_h + decision.k_f * u_f
 
         observer_next = state.observer + dt * observer.derivative(q, state.observer) if observer else state.observer
-        ref_group = decision.group if engaged else select_group(feasible, decision.situation, values.__getitem__, q_r_all)
+        ref_group = decision.group if engaged else select_group(feasible, decision.situation, values.__getitem__, ref_ok)
         q_r = q_r_all[ref_group] if ref_group is not None else np.full(model.n, np.nan)
         estimate = machine.law(law_role).estimate(theta_next, law_next) if law_role is not None else theta_next
         output = StepOutput(

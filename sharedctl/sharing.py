@@ -120,8 +120,8 @@ def select_group(feasible: FeasibleSet, situation: Situation, lyapunov, referenc
 
     `lyapunov(g)` gives the selection value of group g. If no group covers every hazardous
     row (a corridor narrower than the bands), the one covering most rows wins. With
-    `reference` (the groups' projected references q_r, G×n), groups whose q_r lies inside
-    their whole polytope are preferred: a group's projection only respects its own n rows, and
+    `reference` (per group: is its projected reference q_r inside its whole polytope?), groups
+    whose q_r is inside are preferred: a group's projection only respects its own n rows, and
     the machine should not be led towards a face its group does not contain.
     """
     best, best_key = None, None
@@ -133,9 +133,7 @@ def select_group(feasible: FeasibleSet, situation: Situation, lyapunov, referenc
         value = lyapunov(g)
         if not math.isfinite(value):
             continue
-        outside = 0
-        if reference is not None:
-            outside = int(not np.all(feasible.regions[grp.region].values(reference[g]) <= 0.0))
+        outside = 0 if reference is None else int(not reference[g])
         key = (missed, outside, value)
         if best_key is None or key < best_key:
             best, best_key = g, key

@@ -155,14 +155,20 @@ def simulate(loop: ClosedLoop, q0, v0, duration: float, dt: float) -> Trace:
         return observer.velocity(q_, obs_) if observer else v_
 
 
+    zero_n, zero_theta = np.zeros(n), np.zeros(n_theta)
+    no_law_rate = {}
+
     def rates(t, q_, v_, th_, s_, o_, decision, want_signals=False):
         desired = human.desired(t)
         v_meas = velocity_for_control(q_, v_, o_)
-        u_h = np.zeros(n)
-        if loop.sharing.mode is not Mode.MACHINE:
-            u_h = human.command(t, q_, v_).force
-        u_f = np.zeros(n)
-        th_dot, s_dot = np.zeros(n_theta), np.zeros_like(s_)
+        u_h = zero_n
+        if loop.sharing.mode is not Mode.MACHINE and (want_signals or decision.authority is not Authority.MACHINE):
+            u_h = human.command_from(t, desired, q_, v_).force
+        u_f = zero_n
+        th_dot = zero_theta
+        s_dot = no_law_rate.get(s_.size)
+        if s_dot is None:
+            s_dot = no_law_rate[s_.size] = np.zeros(s_.size)
         if decision.authority is not Authority.HUMAN and decision.group is not None:
             grp = feasible.groups[decision.group]
             c = coordinates(grp, q_, v_meas, desired, loop.reference)
@@ -179,7 +185,7 @@ def simulate(loop: ClosedLoop, q0, v0, duration: float, dt: float) -> Trace:
         else:
             u_s = decision.k_h * u_h + decision.k_f * u_f
         acc = model.acceleration(q_, v_, u_s)
-        o_dot = observer.derivative(q_, o_) if observer else np.zeros(0)
+        o_dot = observer.derivative(q_, o_) if observer else o_
         derivs = (v_, acc, th_dot, s_dot, o_dot)
         if want_signals:
             return derivs, (u_h, u_f, u_s, v_meas, desired)
@@ -190,9 +196,10 @@ def simulate(loop: ClosedLoop, q0, v0, duration: float, dt: float) -> Trace:
         t = k * dt
         desired = human.desired(t)
         v_meas = velocity_for_control(q, v, obs)
-        intent = 0.0 if loop.sharing.mode is Mode.MACHINE else human.command(t, q, v).intent
+        intent = 0.0 if loop.sharing.mode is Mode.MACHINE else human.command_from(t, desired, q, v).intent
         q_r_all, values = all_groups(feasible.stack, q, v_meas, desired, loop.reference, ctrl.tracking.lam)
-        arbiter, decision = arbitrate(feasible, loop.sharing, arbiter, q, v_meas, intent, dt, values.__getitem__, q_r_all)
+        ref_ok = feasible.reference_inside(q_r_all)
+        arbiter, decision = arbitrate(feasible, loop.sharing, arbiter, q, v_meas, intent, dt, values.__getitem__, ref_ok)
         engaged = decision.authority is not Authority.HUMAN and decision.group is not None
         if engaged and (not engaged_before or decision.group_changed or decision.role_changed or law is None):
             if law is not None and law_state.size:
@@ -213,7 +220,7 @@ def simulate(loop: ClosedLoop, q0, v0, duration: float, dt: float) -> Trace:
             k += 1
             break
         u_h, u_f, u_s, v_meas, desired = signals
-        ref_group = decision.group if engaged else select_group(feasible, decision.situation, values.__getitem__, q_r_all)
+        ref_group = decision.group if engaged else select_group(feasible, decision.situation, values.__getitem__, ref_ok)
         q_r = q_r_all[ref_group] if ref_group is not None else np.full(n, np.nan)
         estimate = law.estimate(theta_hat, law_state) if (law is not None and law_state.size) else theta_hat
         rec.put(
