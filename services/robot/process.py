@@ -64,6 +64,8 @@ class RobotProcess:
         self.truth_publisher = session.declare_publisher(keys.truth_key(robot_id)) if session else None
         self.alive_publisher = session.declare_publisher(keys.alive_key(robot_id, ROLE)) if session else None
         self.token = session.liveliness().declare_token(keys.alive_key(robot_id, ROLE)) if session else None
+        self.clock_start = time.monotonic()                 # `now` = monotonic − clock_start
+        self.wall_minus_monotonic = time.time() - time.monotonic()
 
     # ----- CAN -------------------------------------------------------------------
     def send(self, frame) -> None:
@@ -87,6 +89,18 @@ class RobotProcess:
                 return
             self.handle_message(msg, now)
 
+    def frame_time(self, msg: can.Message, now: float) -> float:
+        """When the frame arrived (s, loop time), from its receive timestamp; `now` if that is implausible.
+
+        A frame that waited in the socket while this process was not scheduled counts from its
+        arrival, so a stall of the simulator itself never trips a drive's watchdog.
+        """
+        stamp = msg.timestamp
+        if not stamp:
+            return now
+        at = stamp - self.wall_minus_monotonic - self.clock_start
+        return at if now - 1.0 <= at <= now else now
+
     def handle_message(self, msg: can.Message, now: float) -> None:
         if msg.is_error_frame:
             self.counts["error_frames"] += 1
@@ -105,7 +119,7 @@ class RobotProcess:
             self.counts["bad_frames"] += 1
             return
         self.counts["frames_in"] += 1
-        for reply in self.sim.receive(frame, now):
+        for reply in self.sim.receive(frame, self.frame_time(msg, now)):
             self.send(reply)
 
     # ----- Zenoh -----------------------------------------------------------------
@@ -128,6 +142,8 @@ class RobotProcess:
     # ----- loop ------------------------------------------------------------------
     def run(self, stop: StopFlag, duration: float | None = None) -> None:
         clock = RateClock(self.sim.dt)
+        self.clock_start = clock.start
+        self.wall_minus_monotonic = time.time() - time.monotonic()
         next_heartbeat = 0.0
         while not stop.stopped:
             now = clock.elapsed()

@@ -378,3 +378,39 @@ def test_socketcan_vcan0_heartbeats(ports):
             except subprocess.TimeoutExpired:
                 proc.kill()
                 proc.wait(5)
+
+
+class FakeBus:
+    """Records what the process sends (no sockets)."""
+
+    def __init__(self) -> None:
+        self.sent: list[can.Message] = []
+
+    def send(self, msg: can.Message) -> None:
+        self.sent.append(msg)
+
+
+def test_a_stall_of_the_simulator_does_not_trip_a_fed_watchdog():
+    """Frames count from their receive timestamp, not from when the loop got round to them."""
+    from sharedctl.models import OmniRobot
+    from sharedctl.services.robot.plant import RobotSimConfig
+    from sharedctl.services.robot.process import RobotProcess as Shell
+    from sharedctl.services.robot.simulation import RobotSimulation
+
+    db = cantools.database.load_file(str(DBC_PATH))
+    sim = RobotSimulation(OmniRobot(), RobotSimConfig(), [0, 0, 0], [0, 0, 0])
+    shell = Shell(sim, FakeBus(), None, "robot1")
+    wall0 = shell.wall_minus_monotonic + shell.clock_start        # wall-clock time of loop time 0
+
+    def deliver(name, arrived, now, **signals):
+        m = db.get_message_by_name(f"Axis0_{name}")
+        shell.handle_message(can.Message(arbitration_id=m.frame_id, data=m.encode(signals), is_extended_id=False,
+                                         timestamp=wall0 + arrived), now)
+
+    deliver("Set_Controller_Mode", 0.0, 0.0, Control_Mode=TORQUE_CONTROL, Input_Mode=PASSTHROUGH)
+    deliver("Set_Axis_State", 0.0, 0.0, Axis_Requested_State=CLOSED_LOOP_CONTROL)
+    deliver("Set_Input_Torque", 0.08, 0.30, Input_Torque=0.2)    # arrived in time, handled after a 0.2 s stall
+    deliver("Set_Input_Torque", 0.16, 0.30, Input_Torque=0.2)
+    assert sim.axes[0].state == CLOSED_LOOP_CONTROL and sim.axes[0].errors == 0
+    deliver("Set_Input_Torque", 0.29, 0.30, Input_Torque=0.2)    # arrived after the 0.1 s timeout
+    assert sim.axes[0].state == IDLE and sim.axes[0].errors == WATCHDOG_TIMER_EXPIRED
