@@ -180,21 +180,25 @@ def latest_heartbeats(client: CanSimpleClient, timeout: float = 0.5) -> dict:
 
 def test_public_cansimple_client_arms_drives_and_sees_the_watchdog_trip(robot, client):
     # Before arming: all axes IDLE, no errors, heartbeats arrive at ~10 Hz.
-    beats = latest_heartbeats(client)
+    beats = latest_heartbeats(client, timeout=2.0)
     assert {n: (b["Axis_State"], b["Axis_Error"]) for n, b in beats.items()} == {n: (IDLE, 0) for n in NODES}
 
-    # Arm and drive: torque control, closed loop, 0.4 N·m on every wheel (a pure rotation).
+    # Arm and drive: torque control, closed loop, 0.4 N·m on every wheel (a pure rotation),
+    # a torque command every ~10 ms; drive for 0.6 s once every heartbeat reports CLOSED_LOOP_CONTROL.
     client.arm()
     start_turns = {}
     armed = set()
-    t_end = time.monotonic() + 0.8
-    while time.monotonic() < t_end:
+    give_up = time.monotonic() + 2.0
+    armed_at = None
+    while time.monotonic() < (armed_at + 0.6 if armed_at else give_up):
         client.command_torque(0.4)
         for node, name, sig in client.collect(0.01):
             if name == "Heartbeat" and sig["Axis_State"] == CLOSED_LOOP_CONTROL and sig["Axis_Error"] == 0:
                 armed.add(node)
             if name == "Get_Encoder_Estimates":
                 start_turns.setdefault(node, sig["Pos_Estimate"])
+        if armed_at is None and armed == set(NODES):
+            armed_at = time.monotonic()
     assert armed == set(NODES)
 
     # Cyclic encoder estimates show the wheels turning forwards (positive torque → positive velocity).
