@@ -5,10 +5,13 @@ Starts `sharedctl robot`, `sharedctl controller` and `sharedctl console --script
 child processes (headless, or the live dashboard when a terminal is attached), lets the
 scripted operator drive for the scenario's duration, stops them in order (operator,
 controller, robot: SIGTERM, then at most 2 s each; SIGKILL only as a last resort and only to
-its own children), and prints a summary: violations, min_margin and final_speed from
+its own children; between the operator and the controller it waits, at most 3 s, for the
+robot to come to rest: a controller that exits leaves the wheels unpowered and a moving robot
+would coast on), and prints a summary: violations, min_margin and final_speed from
 GroundTruth; tracking and authority (the names of `sharedctl sim --json`) from RobotState;
 and the in-process sampled simulation of the same scenario (`reference`) with the deviation
-between the two. Exit 0 only if nothing was violated and every child exited cleanly.
+between the two. Exit 0 only if nothing was violated, no emergency stop cut the run short, and
+every child exited cleanly.
 
 Wiring (Zenoh peers do not forward between peers they connect, so the operator console
 connects to the controller, whose telemetry it needs):
@@ -52,6 +55,8 @@ from .zenoh_session import EndpointError, check_loopback, free_loopback_port, op
 
 STOP_TIMEOUT = 2.0        # s a child gets to exit after SIGTERM
 STARTUP_TIMEOUT = 30.0    # s until the operator is in control
+SETTLE_SPEED = 0.02       # m/s: the robot is at rest (the controller is stopped only then)
+SETTLE_TIMEOUT = 3.0      # s the controller gets to bring the robot to rest once the operator has let go
 TOLERANCE = {"final_pose_distance": 0.05, "human_authority_difference": 0.1}   # see docs/console.md
 
 
@@ -183,6 +188,22 @@ class Recorder:
             with self.lock:
                 self.events.append((time.monotonic(), msg))
 
+    def wait_at_rest(self, speed: float, timeout: float, hold: float = 0.2) -> float:
+        """Seconds until the ground-truth speed |(ẋ, ẏ)| stays below `speed` for `hold` s (or `timeout`)."""
+        start = time.monotonic()
+        calm_since = None
+        while time.monotonic() - start < timeout:
+            with self.lock:
+                last = self.truth[-1] if self.truth else None
+            if last is not None and np.linalg.norm(last[2][:2]) < speed:
+                calm_since = calm_since or time.monotonic()
+                if time.monotonic() - calm_since >= hold:
+                    break
+            else:
+                calm_since = None
+            time.sleep(0.02)
+        return time.monotonic() - start
+
     def _decode(self, sample, kind):
         try:
             return decode_message(sample.payload.to_bytes(), ROBOT_DIMS, expect=kind)
@@ -209,9 +230,15 @@ def measure(rec: Recorder, start: float | None, duration: float) -> dict:
     log = [{"t": round(a - origin, 3), "kind": ev.kind.value, "severity": ev.severity.value, "source": ev.source,
             "text": ev.text} for a, ev in events[:100]]
     times = [a for a, s in states if start is not None and start <= a <= end]
+    origin_t = start if start is not None else (truth[0][0] if truth else 0.0)
+    outside = [t[0] - origin_t for t in truth if not t[3]]
+    worst = min(truth, key=lambda t: t[4]) if truth else None
     return {
-        "violations": int(sum(1 for t in truth if not t[3])),
-        "min_margin": float(min(t[4] for t in truth)) if truth else float("nan"),
+        "violations": len(outside),
+        "violations_after_window": sum(1 for t in outside if end is not None and t > duration),
+        "first_violation_t": round(outside[0], 3) if outside else None,
+        "min_margin": float(worst[4]) if worst else float("nan"),
+        "min_margin_t": round(worst[0] - origin_t, 3) if worst else None,
         "final_speed": float(np.linalg.norm(last[2])) if last is not None else float("nan"),
         "final_pose": [float(x) for x in last[1]] if last is not None else [],
         "truth_samples": len(truth),
@@ -323,7 +350,12 @@ def run(args) -> int:
     except RuntimeError as exc:
         failure = str(exc)
     finally:
-        for name in ("console", "controller", "robot"):
+        settle = None
+        if "console" in children:
+            children["console"].stop()
+            if children["controller"].popen.poll() is None:
+                settle = rec.wait_at_rest(SETTLE_SPEED, SETTLE_TIMEOUT)
+        for name in ("controller", "robot"):
             if name in children:
                 children[name].stop()
         time.sleep(0.1)    # the last ground truth samples
@@ -331,7 +363,7 @@ def run(args) -> int:
             session.close()
     result = measure(rec, rec.operator_start, duration)
     summary = {"scenario": scenario.name, "controller": loop.controller.name, "requested_duration": duration, **result,
-               "interrupted": stop.stopped, "failure": failure,
+               "interrupted": stop.stopped, "failure": failure, "settle_seconds": settle,
                "processes": {name: children[name].report() for name in ("console", "controller", "robot") if name in children},
                "endpoints": {"robot": robot_ep, "controller": controller_ep, "can": " ".join(can[1:])},
                "wall_seconds": time.monotonic() - start}
@@ -340,7 +372,8 @@ def run(args) -> int:
         summary["deviation"] = deviation(result, summary["reference"])
         summary["tolerance"] = TOLERANCE
     clean = all(c.clean for c in children.values()) and len(children) == 3
-    summary["ok"] = bool(failure is None and clean and result["violations"] == 0 and result["truth_samples"] > 0)
+    summary["ok"] = bool(failure is None and clean and result["violations"] == 0 and result["truth_samples"] > 0
+                         and result["estops"] == 0)   # an estop means the scenario did not run
     _report(summary, args, children, log_dir)
     return 0 if summary["ok"] else 1
 
@@ -357,7 +390,13 @@ def _report(summary: dict, args, children: dict, log_dir: Path) -> None:
         for child in children.values():
             if not child.clean and child.tail():
                 print(f"--- {child.name} (exit {child.exit_code}) ---\n{child.tail()}", file=sys.stderr)
-        print(f"sharedctl demo: FAILED ({summary['failure'] or 'see the table'}); logs in {log_dir}", file=sys.stderr)
+        reasons = [r for r in (summary["failure"],
+                               f"{summary['violations']} violations" if summary["violations"] else None,
+                               f"{summary['estops']} emergency stops" if summary["estops"] else None,
+                               "a child did not exit cleanly" if not all(
+                                   p["exit_code"] == 0 and not p["killed"] for p in summary["processes"].values()) else None)
+                   if r]
+        print(f"sharedctl demo: FAILED ({'; '.join(reasons) or 'see the table'}); logs in {log_dir}", file=sys.stderr)
     elif not args.log_dir:
         shutil.rmtree(log_dir, ignore_errors=True)
 

@@ -60,6 +60,7 @@ class Telemetry:
         self.state: RobotState | None = None
         self.state_arrival: float | None = None     # monotonic s
         self.first_arrival: float | None = None
+        self.time_origin = 0.0                      # the first RobotState's time (controller clock)
         self.states = 0
         self.events: deque = deque(maxlen=6)
         self.event_count = 0
@@ -76,7 +77,7 @@ class Telemetry:
         now = time.monotonic()
         with self.lock:
             if self.first_arrival is None:
-                self.first_arrival = now
+                self.first_arrival, self.time_origin = now, state.time
             self.state, self.state_arrival = state, now
             self.states += 1
             if not self.trail or np.hypot(state.q[0] - self.trail[-1][0], state.q[1] - self.trail[-1][1]) > 0.02:
@@ -152,7 +153,7 @@ class ConsoleApp:
                 mode="script" if self.script else "keyboard", state=state,
                 state_age=None if arrival is None else now - arrival, states_received=tel.states,
                 events=deque(tel.events, maxlen=6), trail=deque(tel.trail, maxlen=400), frame=frame, grid=grid,
-                keys_help=KEYS_SCRIPT if self.script else KEYS_KEYBOARD,
+                keys_help=KEYS_SCRIPT if self.script else KEYS_KEYBOARD, time_origin=tel.time_origin,
             )
         with self.lock:
             view.command = self.last_command

@@ -43,6 +43,7 @@ class DashboardView:
     frame: MapFrame | None = None
     grid: list | None = None                 # map background (map_view.background)
     keys_help: str = ""
+    time_origin: float = 0.0                 # s on the controller's clock shown as t = 0 (its first RobotState)
 
 
 def bar(value: float, width: int = 20, style: str = "cyan") -> Text:
@@ -117,13 +118,13 @@ def link_panel(view: DashboardView) -> Panel:
     return Panel(table, title="link")
 
 
-def estimates_panel(state: RobotState | None) -> Panel:
+def estimates_panel(state: RobotState | None, origin: float = 0.0) -> Panel:
     if state is None:
         return Panel(Text("–", style="grey50"), title="estimates and margins")
     table = Table.grid(padding=(0, 1))
     table.add_column(style="bold")
     table.add_column()
-    table.add_row("t", f"{state.time:.2f} s  (seq {state.seq})")
+    table.add_row("t", f"{state.time - origin:.2f} s  (seq {state.seq})")
     table.add_row("q", _vec(state.q))
     table.add_row("q̇̂", _vec(state.qd_hat))
     table.add_row("q_ref", _vec(state.q_ref))
@@ -157,12 +158,12 @@ def operator_panel(view: DashboardView) -> Panel:
     return Panel(table, title="operator")
 
 
-def events_panel(events) -> Panel:
+def events_panel(events, origin: float = 0.0) -> Panel:
     text = Text()
     for i, ev in enumerate(events):
         if i:
             text.append("\n")
-        text.append(f"{ev.time:7.2f} ", style="grey50")
+        text.append(f"{ev.time - origin:7.2f} ", style="grey50")
         text.append(f"{ev.kind.value:<15}", style=SEVERITY_STYLE.get(ev.severity.value, ""))
         text.append(f" {ev.source}: {ev.text}")
     if not events:
@@ -197,8 +198,8 @@ def render(view: DashboardView) -> Layout:
     layout["body"].split_row(Layout(name="left", size=map_width, ratio=3), Layout(name="right", ratio=2))
     layout["left"].split_column(Layout(map_panel(view), name="map", size=map_height), Layout(name="lower"))
     layout["lower"].split_row(Layout(authority_panel(view.state)), Layout(link_panel(view)))
-    layout["right"].split_column(Layout(estimates_panel(view.state), size=13), Layout(operator_panel(view)))
-    layout["events"].update(events_panel(view.events))
+    layout["right"].split_column(Layout(estimates_panel(view.state, view.time_origin), size=13), Layout(operator_panel(view)))
+    layout["events"].update(events_panel(view.events, view.time_origin))
     return layout
 
 
