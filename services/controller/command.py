@@ -4,6 +4,7 @@
                          [--can-interface I --can-channel C --can-option k=v …]
                          [--zenoh-listen EP]… [--zenoh-connect EP]… [--robot-id ID]
                          [--rate 500] [--telemetry-rate 50] [--torque-limit 60] [--duration S]
+                         [--feedback-timeout-ms 50] [--priority high|realtime|normal] [--quiet]
 """
 from __future__ import annotations
 
@@ -17,6 +18,7 @@ from .. import can_bus, zenoh_session
 from ..lifecycle import StopFlag
 from ..scenario_files import load
 from .daemon import ControllerDaemon, DaemonConfig
+from .priority import LEVELS, raise_priority
 
 PROG = "sharedctl controller"
 
@@ -38,6 +40,8 @@ def add_parser(subparsers) -> None:
     p.add_argument("--torque-limit", type=float, default=60.0, help="wheel torque limit, N·m (default 60)")
     p.add_argument("--feedback-timeout-ms", type=float, default=50.0, help="CAN feedback age that triggers Estop (default 50)")
     p.add_argument("--duration", type=float, help="stop after this many seconds (default: run until SIGINT/SIGTERM)")
+    p.add_argument("--priority", choices=LEVELS, default="high",
+                   help="scheduling: high = nice -10 (default), realtime = also SCHED_FIFO for the loop thread, normal")
     p.add_argument("--quiet", action="store_true", help="no warnings on stderr (events are still published)")
     p.set_defaults(handler=run)
 
@@ -62,6 +66,7 @@ def run(args) -> int:
         feedback_timeout=args.feedback_timeout_ms / 1e3, duration=args.duration, verbose=not args.quiet,
     )
     bus = session = daemon = None
+    priority = raise_priority(args.priority)   # before Zenoh and CAN start their threads
     try:
         bus = can_bus.open_bus(spec)
         session = zenoh_session.open_session(listen, connect)
@@ -70,7 +75,7 @@ def run(args) -> int:
         print(
             f"{PROG}: robot {robot_id}, scenario {scenario.name}, controller {loop.controller.name}, "
             f"{config.rate:g} Hz (telemetry {config.telemetry_rate:g} Hz), torque limit {config.torque_limit:g} N·m, "
-            f"CAN {spec.describe()}, Zenoh {zenoh_desc}",
+            f"CAN {spec.describe()}, Zenoh {zenoh_desc}, priority {priority}",
             flush=True,
         )
         summary = daemon.run(stop)

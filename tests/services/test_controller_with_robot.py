@@ -99,7 +99,8 @@ def system():
     procs = [
         subprocess.Popen(cli + ["robot", *can_args, "--zenoh-listen", f"tcp/127.0.0.1:{z_robot}"],
                          stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True),
-        subprocess.Popen(cli + ["controller", *can_args, "--zenoh-listen", f"tcp/127.0.0.1:{z_ctrl}", "--quiet"],
+        subprocess.Popen(cli + ["controller", *can_args, "--zenoh-listen", f"tcp/127.0.0.1:{z_ctrl}", "--quiet",
+                                "--feedback-timeout-ms", "150"],   # the robot runs unprivileged on a busy host
                          stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True),
     ]
     session = zenoh_session.open_session(connect=[f"tcp/127.0.0.1:{z_robot}", f"tcp/127.0.0.1:{z_ctrl}"])
