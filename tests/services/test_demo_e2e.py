@@ -1,0 +1,111 @@
+"""End to end: `sharedctl demo --headless --json` runs robot, controller and scripted operator as processes.
+
+Acceptance: the paper's convex (20 s) and non-convex (30 s) scenarios run with 0 ground-truth
+violations and no emergency stop; the distributed run matches the in-process sampled
+simulation (`reference`) within TOLERANCE (final (x, y) within 5 cm, human-authority share
+within 0.1); every child exits with 0 within 2 s of SIGTERM (never killed) and none is left.
+"""
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from sharedctl.services.demo_command import TOLERANCE
+
+pytestmark = pytest.mark.slow
+RUNS = {"paper_convex": 20.0, "paper_nonconvex": 30.0}
+
+
+def alive(pid: int) -> bool:
+    """A process with this pid exists and is one of ours (a `sharedctl.services.cli` process)."""
+    try:
+        cmdline = Path(f"/proc/{pid}/cmdline").read_bytes()
+    except (FileNotFoundError, ProcessLookupError):
+        return False
+    return b"sharedctl.services.cli" in cmdline
+
+
+def run_demo(tmp_path: Path, *args: str, timeout: float = 150.0) -> tuple[subprocess.CompletedProcess, dict]:
+    out = tmp_path / "demo.json"
+    proc = subprocess.run(
+        [sys.executable, "-m", "sharedctl.services.cli", "demo", "--headless", "--json", str(out),
+         "--log-dir", str(tmp_path / "logs"), *args],
+        stdin=subprocess.DEVNULL, capture_output=True, text=True, timeout=timeout)
+    summary = json.loads(out.read_text()) if out.exists() else {}
+    return proc, summary
+
+
+@pytest.fixture(scope="module", params=sorted(RUNS))
+def demo(request, tmp_path_factory):
+    scenario = request.param
+    proc, summary = run_demo(tmp_path_factory.mktemp(scenario), "--scenario", scenario)
+    assert summary, f"no summary: {proc.stdout}\n{proc.stderr}"
+    return scenario, proc, summary
+
+
+def test_the_demo_exits_0(demo):
+    _, proc, summary = demo
+    assert proc.returncode == 0, f"{proc.stderr}\n{json.dumps(summary, indent=1)[:3000]}"
+    assert summary["ok"]
+
+
+def test_no_ground_truth_sample_leaves_the_feasible_set(demo):
+    _, _, summary = demo
+    assert summary["truth_samples"] > 90 * summary["duration"]
+    assert summary["violations"] == 0
+    assert summary["min_margin"] > 0.0
+
+
+def test_the_run_lasts_the_scenario_and_nothing_stops_the_robot(demo):
+    scenario, _, summary = demo
+    assert summary["duration"] == pytest.approx(RUNS[scenario], abs=0.1)
+    assert summary["estops"] == 0, summary["event_log"]
+    assert summary["steps"] > 40 * RUNS[scenario]          # RobotState at 50 Hz
+
+
+def test_the_distributed_run_matches_the_sampled_reference(demo):
+    _, _, summary = demo
+    dev = summary["deviation"]
+    assert dev["final_pose_distance"] <= TOLERANCE["final_pose_distance"], dev
+    assert dev["human_authority_difference"] <= TOLERANCE["human_authority_difference"], dev
+    assert summary["reference"]["violations"] == 0
+
+
+def test_every_process_exits_cleanly_within_2_s_of_sigterm(demo):
+    _, _, summary = demo
+    assert list(summary["processes"]) == ["console", "controller", "robot"]
+    for name, proc in summary["processes"].items():
+        assert proc["exit_code"] == 0 and not proc["killed"], (name, proc)
+        assert proc["stop_seconds"] < 2.0, (name, proc)
+
+
+def test_no_process_is_left_behind(demo):
+    _, _, summary = demo
+    assert not [name for name, proc in summary["processes"].items() if alive(proc["pid"])]
+
+
+def test_sigterm_to_the_demo_stops_every_child_and_leaves_none(tmp_path):
+    out = tmp_path / "demo.json"
+    demo = subprocess.Popen(
+        [sys.executable, "-m", "sharedctl.services.cli", "demo", "--headless", "--no-reference", "--duration", "60",
+         "--json", str(out), "--log-dir", str(tmp_path / "logs")],
+        stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, stderr=subprocess.STDOUT)
+    try:
+        time.sleep(8.0)                         # started, the operator driving
+        demo.send_signal(signal.SIGTERM)
+        demo.wait(timeout=15)
+    finally:
+        if demo.poll() is None:
+            demo.kill()
+            demo.wait()
+    summary = json.loads(out.read_text())
+    assert summary["interrupted"]
+    assert summary["duration"] < 10.0
+    for name, proc in summary["processes"].items():
+        assert proc["exit_code"] == 0 and proc["stop_seconds"] < 2.0 and not proc["killed"], (name, proc)
+        assert not alive(proc["pid"]), name
