@@ -11,6 +11,7 @@ decoding; frames the codec refuses are counted and skipped; a frame never crashe
 """
 from __future__ import annotations
 
+import gc
 import os
 import sys
 import time
@@ -141,6 +142,8 @@ class RobotProcess:
 
     # ----- loop ------------------------------------------------------------------
     def run(self, stop: StopFlag, duration: float | None = None) -> None:
+        gc.collect()
+        gc.freeze()          # start-up objects out of the collector's way: shorter pauses in the loop
         clock = RateClock(self.sim.dt)
         self.clock_start = clock.start
         self.wall_minus_monotonic = time.time() - time.monotonic()
