@@ -57,7 +57,8 @@ STOP_TIMEOUT = 2.0        # s a child gets to exit after SIGTERM
 STARTUP_TIMEOUT = 30.0    # s until the operator is in control
 SETTLE_SPEED = 0.02       # m/s: the robot is at rest (the controller is stopped only then)
 SETTLE_TIMEOUT = 3.0      # s the controller gets to bring the robot to rest once the operator has let go
-TOLERANCE = {"final_pose_distance": 0.05, "human_authority_difference": 0.1}   # see docs/console.md
+# run vs `reference_plant` (the same plant in process); chosen from measurements, see docs/console.md
+TOLERANCE = {"final_pose_distance": 0.05, "human_authority_difference": 0.1}
 
 
 def add_parser(subparsers) -> None:
@@ -126,6 +127,18 @@ def start_child(name: str, argv: list[str], log_dir: Path, interactive: bool = F
         popen = subprocess.Popen(cmd, env=env, stdin=subprocess.DEVNULL, stdout=out, stderr=subprocess.STDOUT,
                                  start_new_session=True)
     return Child(name, popen, log)
+
+
+def udp_receive_buffer_errors() -> int | None:
+    """Host-wide count of UDP datagrams dropped on a full receive buffer (Linux /proc/net/snmp), or None.
+
+    CAN on udp_multicast loses frames this way when a reader falls behind: lost torque frames
+    trip the drives' watchdogs, lost encoder frames the controller's feedback timeout."""
+    try:
+        lines = [line.split() for line in Path("/proc/net/snmp").read_text().splitlines() if line.startswith("Udp:")]
+        return int(lines[1][lines[0].index("RcvbufErrors")])
+    except (OSError, IndexError, ValueError):
+        return None
 
 
 def free_udp_port() -> int:
@@ -258,7 +271,7 @@ def measure(rec: Recorder, start: float | None, duration: float) -> dict:
 
 
 def reference_run(scenario, controller: str | None, duration: float) -> dict:
-    """`simulate_sampled` of the same scenario and law at 500 Hz: the in-process reference."""
+    """`simulate_sampled` of the same scenario and law at 500 Hz: the in-process reference (the model as plant)."""
     from sharedctl.metrics import summarize
     from sharedctl.sampled import simulate_sampled
 
@@ -269,6 +282,52 @@ def reference_run(scenario, controller: str | None, duration: float) -> dict:
     summary["final_pose"] = [float(x) for x in trace.q[-1]]
     summary["final_speed"] = float(np.linalg.norm(trace.v[-1]))
     return summary
+
+
+def plant_reference_run(scenario, controller: str | None, duration: float) -> dict:
+    """The same sampled loop (SharedController.step at 500 Hz, the scripted operator with the wire's [−1, 1]
+    clip) on the simulated robot's true plant — `sharedctl robot`'s wheel friction and drive limits
+    (services/robot/plant.py, RK4 at 1 kHz). What the distributed run must reproduce up to its latencies,
+    rates and odometry; `reference` differs from both by the friction the model does not have."""
+    from sharedctl.human import intent
+    from sharedctl.shared_controller import OperatorInput, SharedController
+    from sharedctl.sharing import Authority as CoreAuthority
+
+    from .robot.plant import Plant, RobotSimConfig
+
+    loop, q0, v0 = scenario.closed_loop(controller)
+    model, human, feasible = loop.model, loop.human, loop.feasible
+    ctrl = SharedController(model, feasible, loop.controller, loop.sharing, loop.reference)
+    state = ctrl.initial_state(q0, loop.theta_hat0)
+    plant = Plant(model, RobotSimConfig.from_table(scenario.data.get("robot_sim")))
+    ps = plant.initial_state(q0, v0)
+    period, substeps = 0.002, 2
+    steps = int(round(duration / period))
+    human_share, errors, margins, outside, out = [], [], [], 0, None
+    for k in range(steps):
+        t = k * period
+        d = np.clip(human.command(t, ps.q, ps.qd).deflection, -1.0, 1.0)
+        operator = OperatorInput(human.desired(t), human.kp * d, intent(human.kp, d))
+        state, out = ctrl.step(state, ps.q, None if loop.controller.observer else ps.qd, operator, period)
+        human_share.append(out.authority is CoreAuthority.HUMAN)
+        errors.append(float(np.linalg.norm(ps.q - out.q_r)))
+        margins.append(feasible.margin(ps.q))
+        outside += not feasible.contains(ps.q)
+        tau = model.wheel_torques(ps.q, out.u_s)
+        for _ in range(substeps):
+            ps = plant.step(ps, tau, period / substeps)
+    human_share, err = np.array(human_share), np.array(errors)
+    err = err[np.isfinite(err)]
+    return {
+        "violations": int(outside), "min_margin": float(min(margins)),
+        "tracking_rmse": float(np.sqrt(np.mean(err**2))) if err.size else float("nan"),
+        "final_error": float(err[-1]) if err.size else float("nan"),
+        "human_authority": float(np.mean(human_share)),
+        "switches": int(np.count_nonzero(human_share[1:] != human_share[:-1])),
+        "theta_hat": [float(x) for x in out.theta_estimate] if out is not None else [],
+        "final_pose": [float(x) for x in ps.q], "final_speed": float(np.linalg.norm(ps.qd)),
+        "steps": steps, "duration": steps * period,
+    }
 
 
 def deviation(run: dict, ref: dict) -> dict:
@@ -314,6 +373,7 @@ def run(args) -> int:
     common = ["--robot-id", args.robot_id]
 
     rec = Recorder(loop.feasible)
+    udp_errors_before = udp_receive_buffer_errors()
     children: dict[str, Child] = {}
     session = None
     failure = None
@@ -362,6 +422,9 @@ def run(args) -> int:
         if session is not None:
             session.close()
     result = measure(rec, rec.operator_start, duration)
+    udp_errors_after = udp_receive_buffer_errors()
+    result["host_udp_receive_buffer_errors"] = (None if udp_errors_before is None or udp_errors_after is None
+                                                else udp_errors_after - udp_errors_before)
     summary = {"scenario": scenario.name, "controller": loop.controller.name, "requested_duration": duration, **result,
                "interrupted": stop.stopped, "failure": failure, "settle_seconds": settle,
                "processes": {name: children[name].report() for name in ("console", "controller", "robot") if name in children},
@@ -370,6 +433,8 @@ def run(args) -> int:
     if not args.no_reference and failure is None:
         summary["reference"] = reference_run(scenario, args.controller, duration)
         summary["deviation"] = deviation(result, summary["reference"])
+        summary["reference_plant"] = plant_reference_run(scenario, args.controller, duration)
+        summary["deviation_plant"] = deviation(result, summary["reference_plant"])
         summary["tolerance"] = TOLERANCE
     clean = all(c.clean for c in children.values()) and len(children) == 3
     summary["ok"] = bool(failure is None and clean and result["violations"] == 0 and result["truth_samples"] > 0
@@ -405,22 +470,25 @@ def _print_table(summary: dict) -> None:
     from rich.console import Console
     from rich.table import Table
 
-    ref = summary.get("reference", {})
+    plant, ref = summary.get("reference_plant", {}), summary.get("reference", {})
     table = Table(title=f"sharedctl demo: {summary['scenario']} ({summary['controller']})")
     table.add_column("measure", no_wrap=True)
     table.add_column("distributed", justify="right")
-    table.add_column("sampled reference", justify="right")
+    table.add_column("sampled, robot plant", justify="right")
+    table.add_column("sampled, model plant", justify="right")
     fmt = lambda v: ("[" + ", ".join(f"{x:.3f}" for x in v) + "]") if isinstance(v, list) else (
         f"{v:.4g}" if isinstance(v, float) else str(v))
     for key in ("violations", "min_margin", "final_speed", "final_pose", "tracking_rmse", "final_error",
                 "human_authority", "switches", "theta_hat", "steps", "duration"):
-        table.add_row(key, fmt(summary.get(key)), fmt(ref[key]) if key in ref else "")
-    for key, value in summary.get("deviation", {}).items():
-        table.add_row(f"Δ {key}", fmt(value), "")
+        table.add_row(key, fmt(summary.get(key)), fmt(plant[key]) if key in plant else "",
+                      fmt(ref[key]) if key in ref else "")
+    dev_plant, dev = summary.get("deviation_plant", {}), summary.get("deviation", {})
+    for key in dev_plant:
+        table.add_row(f"Δ {key}", "", fmt(dev_plant[key]), fmt(dev.get(key)))
     for name, proc in summary["processes"].items():
         stop = proc["stop_seconds"]
         table.add_row(f"{name} exit", f"{proc['exit_code']}" + (" (killed)" if proc["killed"] else ""),
-                      "" if stop is None else f"stopped in {stop:.2f} s")
-    table.add_row("estops", str(summary["estops"]), "")
-    table.add_row("result", "[green]OK[/green]" if summary["ok"] else "[red]FAILED[/red]", "")
+                      "" if stop is None else f"stopped in {stop:.2f} s", "")
+    table.add_row("estops", str(summary["estops"]), "", "")
+    table.add_row("result", "[green]OK[/green]" if summary["ok"] else "[red]FAILED[/red]", "", "")
     Console().print(table)

@@ -2,8 +2,11 @@
 
 Acceptance: the paper's convex (20 s) and non-convex (30 s) scenarios run with 0 ground-truth
 violations and no emergency stop; the distributed run matches the in-process sampled
-simulation (`reference`) within TOLERANCE (final (x, y) within 5 cm, human-authority share
-within 0.1); every child exits with 0 within 2 s of SIGTERM (never killed) and none is left.
+simulation of the same plant (`reference_plant`: SharedController.step at 500 Hz on the
+robot's true plant with its wheel friction) within TOLERANCE (final (x, y) within 5 cm,
+human-authority share within 0.1); every child exits with 0 within 2 s of SIGTERM (never
+killed) and none is left. (`reference`, simulate_sampled with the model as plant, is reported
+too; it has no friction, so in the non-convex run, which ends moving, it leads by ~0.2 m.)
 """
 import json
 import os
@@ -68,12 +71,16 @@ def test_the_run_lasts_the_scenario_and_nothing_stops_the_robot(demo):
     assert summary["steps"] > 40 * RUNS[scenario]          # RobotState at 50 Hz
 
 
-def test_the_distributed_run_matches_the_sampled_reference(demo):
+def test_the_distributed_run_matches_the_sampled_simulation_of_the_same_plant(demo):
     _, _, summary = demo
-    dev = summary["deviation"]
+    dev = summary["deviation_plant"]
     assert dev["final_pose_distance"] <= TOLERANCE["final_pose_distance"], dev
     assert dev["human_authority_difference"] <= TOLERANCE["human_authority_difference"], dev
-    assert summary["reference"]["violations"] == 0
+
+
+def test_the_in_process_references_are_safe_too(demo):
+    _, _, summary = demo
+    assert summary["reference"]["violations"] == 0 and summary["reference_plant"]["violations"] == 0
 
 
 def test_every_process_exits_cleanly_within_2_s_of_sigterm(demo):

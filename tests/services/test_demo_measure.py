@@ -62,3 +62,15 @@ def test_deviation_compares_final_pose_and_authority_share():
     assert dev["final_pose_distance"] == pytest.approx(0.05)
     assert dev["human_authority_difference"] == pytest.approx(0.05)
     assert dev["within_tolerance"]
+
+
+def test_without_friction_the_robot_plant_reference_is_the_model_plant_reference():
+    from sharedctl.scenario import parse
+    from sharedctl.services.demo_command import plant_reference_run, reference_run
+
+    data = dict(load("paper_convex").data, robot_sim={"friction_viscous": 0.0, "friction_coulomb": 0.0})
+    scenario = parse(data)
+    model_plant = reference_run(scenario, None, 2.0)
+    robot_plant = plant_reference_run(scenario, None, 2.0)
+    assert np.allclose(robot_plant["final_pose"], model_plant["final_pose"], atol=2e-3)
+    assert robot_plant["human_authority"] == pytest.approx(model_plant["human_authority"])
