@@ -1,0 +1,97 @@
+"""Invariance and sharing on the second plant: the two-link planar arm under gravity.
+
+q = [q1, q2] (rad); the admissible sets are joint-limit boxes (rows ±q_j ≤ limit, unit
+normals, so the bands b1 = 0.3 rad, b2 = 0.6 rad) and a non-convex union of two boxes (an L).
+Every box side is ≥ 2 rad > 2·b2, so at most one row per joint is in the bands and any two
+hazardous rows (one per joint) form an invertible group. The operator is the scenario files'
+damped spring (k_p = 20 N·m/rad, k_d = 12 N·m·s/rad, no gravity compensation: the arm sags
+towards the lower limits while the desired line is still inside), following a desired line
+that leaves the box. dt = 2e-3, as in the omnidirectional tests.
+
+The arm has position-dependent inertia (smallest eigenvalue of M ≈ 0.01 kg m² near
+q2 ≈ 0.3–0.5 rad), Ṁ ≠ 0 and gravity: every term the omnidirectional robot leaves at zero.
+"""
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+import strategies as S  # noqa: E402
+
+from sharedctl.sets import SetClass  # noqa: E402
+from sharedctl.sharing import Authority, Mode, SharingParameters  # noqa: E402
+
+LINES = {"up-right": (0.4, 0.3), "down-left": (-0.3, -0.2)}
+
+
+def assert_invariant(case, controller):
+    trace = S.run(case, controller)
+    failure = S.invariance_failure(case, controller, trace)
+    assert failure is None, failure
+    return trace
+
+
+# Known failures (commit 915f504), reproduced exactly by the case named in each message.
+ARM_DIVERGES = pytest.mark.xfail(strict=True, reason=(
+    "arm2, dt = 2e-3: the CE law (12) (hazard law of ce, nce and of) diverges near a joint limit. "
+    "down-left: the arm sags under gravity into q1 >= -0.8 while the desired is 0.35 rad inside, "
+    "the first hazard sample is 21 mm (rad) from the limit, u_f = (170, 0.5) N m with theta_hat = 0, "
+    "one step later qdot = (4.0, -19.2) rad/s, u_f = 3.4e3 N m and the state leaves the box. "
+    "up-right: theta_hat adapted during MACHINE samples leaves the physical set "
+    "(theta_3 = -1.29: M(theta_hat) indefinite); the Y theta_hat term then acts as negative damping "
+    "~1/|x| and qdot reaches -232 rad/s at t = 3.50 s. Also fails in Mode.MACHINE and at dt = 5e-4."))
+BOX_FAILS = {("down-left", "ce"), ("down-left", "nce"), ("down-left", "of"), ("up-right", "ce"), ("up-right", "nce")}
+
+
+@pytest.mark.parametrize("line,controller", [
+    pytest.param(line, c, marks=ARM_DIVERGES if (line, c) in BOX_FAILS else ())
+    for line in sorted(LINES) for c in S.CONTROLLERS
+])
+def test_arm_joint_box_stays_inside(line, controller):
+    """−0.8 ≤ q1 ≤ 1.2, −0.3 ≤ q2 ≤ 2.0 from q0 = (0.2, 0.8) at rest; the desired line
+    leaves through the upper corner (up-right) or the lower corner (down-left)."""
+    trace = assert_invariant(S.arm_box_case(LINES[line]), controller)
+    assert np.any(trace.set_class == int(SetClass.HAZARD))
+
+
+@pytest.mark.parametrize("controller", S.CONTROLLERS)
+def test_arm_union_of_two_boxes_stays_inside(controller):
+    """The L = {−0.8 ≤ q1 ≤ 1.2, −0.3 ≤ q2 ≤ 0.7} ∪ {−0.8 ≤ q1 ≤ 0.4, −0.3 ≤ q2 ≤ 2.0};
+    the desired line heads into the missing corner q1 > 0.4, q2 > 0.7."""
+    trace = assert_invariant(S.arm_union_case(), controller)
+    assert np.any(trace.set_class == int(SetClass.HAZARD))
+
+
+@pytest.mark.xfail(strict=True, reason=(
+    "random_arm_box_case(2222443), nce (the first example): same divergence as "
+    "test_arm_joint_box_stays_inside — the state leaves the box at t = 2.89 s through q1 >= -0.89."))
+@settings(max_examples=3, **S.SIM_SETTINGS)
+@given(case=S.arm_box_cases, controller=S.controllers)
+def test_random_arm_box_stays_inside(case, controller):
+    """Random boxes (sides 2–3 rad), q0 with slack ≥ 0.4 rad, |q̇0| ≤ 0.3 rad/s, a desired
+    line at 0.2–0.6 rad/s leaving within 4 s."""
+    assert_invariant(case, controller)
+
+
+def test_arm_sharing_properties_hold():
+    """Transparency, machine authority in the hazardous set, the blend and the Schmitt
+    trigger on one arm run (the L-shaped set, ce law), on every sample the arbiter decided."""
+    case = S.arm_union_case()
+    trace = S.run(case, "ce")
+    assert np.any(trace.set_class == int(SetClass.HAZARD))
+    assert np.any(trace.authority == int(Authority.SHARED))
+    assert S.release_samples(trace).size > 0
+    assert S.sharing_failures(trace, case.sharing, S.DT) == []
+    assert S.takeover_samples(trace).size <= case.duration / case.sharing.min_machine_dwell + 1
+
+
+def test_arm_operator_alone_leaves_the_box():
+    """Mode.HUMAN: the operator's line leaves the box and nothing stops the arm."""
+    case = S.arm_box_case(LINES["up-right"])
+    trace = S.run(case, "ce", sharing=SharingParameters(mode=Mode.HUMAN))
+    assert not trace.inside.all()
