@@ -97,7 +97,8 @@ def system():
     listener = BusListener(port)
     listener.start()
     procs = [
-        subprocess.Popen(cli + ["robot", *can_args, "--zenoh-listen", f"tcp/127.0.0.1:{z_robot}"],
+        # the simulated robot is the plant: on a busy host give it the controller's default priority too
+        subprocess.Popen(["nice", "-n", "-10", *cli, "robot", *can_args, "--zenoh-listen", f"tcp/127.0.0.1:{z_robot}"],
                          stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True),
         subprocess.Popen(cli + ["controller", *can_args, "--zenoh-listen", f"tcp/127.0.0.1:{z_ctrl}", "--quiet",
                                 "--feedback-timeout-ms", "150"],   # the robot runs unprivileged on a busy host
@@ -132,10 +133,14 @@ def test_controller_drives_the_simulated_robot_estops_when_it_goes_silent_and_st
             control_request=ControlRequest.NONE)))
         time.sleep(0.02)
     q_truth = np.array(truths[-1].q)
-    assert q_truth[1] - q_start[1] > 0.02                              # the robot moved along +y
+    assert q_truth[1] - q_start[1] > 0.02, [(round(e.time % 1000, 3), e.text) for e in events]   # moved along +y
+    assert not states[-1].estop_active
+    # hands off (silent operator): u_s = 0 in the safe set, the robot rolls to rest on wheel friction
+    wait_for(lambda: np.linalg.norm(truths[-1].qd) < 1e-3 and np.linalg.norm(states[-1].qd_hat) < 1e-3, 10.0, "rest")
+    time.sleep(0.1)
     s = states[-1]
-    assert not s.estop_active and s.authority.value in ("human", "shared", "machine")
-    np.testing.assert_allclose(s.q, q_truth, atol=0.03)                # odometry vs ground truth
+    assert s.authority.value == "human" and s.lease_holder is None and s.link.staleness_ms > 300
+    np.testing.assert_allclose(s.q, truths[-1].q, atol=0.005)        # odometry vs ground truth, at rest
     assert s.link.can_feedback_age_ms < 50
 
     robot.send_signal(signal.SIGTERM)                                  # CAN feedback stops → estop
