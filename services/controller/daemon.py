@@ -154,6 +154,8 @@ class ControllerDaemon:
         self.heartbeat_seq = 0
         self.started_at = time.monotonic()
         self.last_authority = None
+        self.last_set_class = None
+        self.last_holder = None
         self.last_hands_off_reason = None
         self.last_rejected = 0
         self.histogram = LatenessHistogram()     # tick lateness (jitter)
@@ -261,6 +263,10 @@ class ControllerDaemon:
         if status.reason != self.last_hands_off_reason:
             self.last_hands_off_reason = status.reason
             self.emit(now, "operator", "info", "info", f"operator input: {status.reason}")
+        holder = None if status.hands_off else status.operator_id
+        if holder != self.last_holder:
+            self.emit(now, "lease", "lease_change", "info", f"operator in control: {holder or 'none'}")
+            self.last_holder = holder
 
         if status.estop_requested and self.mode is not Mode.ESTOPPED:
             self.estop(now, "estop requested by the operator")
@@ -312,6 +318,11 @@ class ControllerDaemon:
             self.saturated += 1
         self.out, self.u_s, self.tau = out, out.u_s, tau
         self.master.send_torques(tau)
+        if out.set_class != self.last_set_class:
+            if self.last_set_class is not None:
+                self.emit(now, "set", "set_transition", "info",
+                          f"set {self.last_set_class.name.lower()} -> {out.set_class.name.lower()}")
+            self.last_set_class = out.set_class
         if out.authority != self.last_authority:
             if self.last_authority is not None:
                 self.emit(now, "authority", "authority_change", "info",

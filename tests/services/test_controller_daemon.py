@@ -294,7 +294,7 @@ def test_operator_commands_drive_the_robot_and_telemetry_reports_them(robot, dae
         s = states[-1]
         assert s.authority.value == "human" and s.k_s == 1.0 and s.lease_holder == "tester"
         np.testing.assert_allclose(s.u_h, (10.0, 0.0, 0.0), atol=1e-9)      # k_p = 20 × 0.5
-        np.testing.assert_allclose(s.u_s, s.u_h, atol=1e-9)                 # transparent in the safe set
+        np.testing.assert_allclose(s.u_s, s.u_h, atol=1e-9, err_msg=f"{s} {[e.text for e in events]}")  # transparent
         assert len(s.group_classes) == 4 and s.theta_hat and len(s.wheel_torques) == 3
         assert s.link.staleness_ms < 300 and s.link.can_feedback_age_ms < 50 and not s.estop_active
         np.testing.assert_allclose(s.q, robot.q_at(s.time), atol=0.01)      # odometry tracks the plant
