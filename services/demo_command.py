@@ -141,6 +141,17 @@ def udp_receive_buffer_errors() -> int | None:
         return None
 
 
+def raise_priority(pid: int, nice: int = -10) -> str:
+    """Give the simulated robot (the plant) the controller's default priority, nice −10, if allowed.
+
+    Set right after the start, before the child creates threads (they inherit it)."""
+    try:
+        os.setpriority(os.PRIO_PROCESS, pid, nice)
+        return f"nice {nice}"
+    except (PermissionError, OSError):
+        return "normal"
+
+
 def free_udp_port() -> int:
     with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
         s.bind(("127.0.0.1", 0))
@@ -377,23 +388,28 @@ def run(args) -> int:
     children: dict[str, Child] = {}
     session = None
     failure = None
+    robot_priority = None
     start = time.monotonic()
     try:
         children["robot"] = start_child("robot", ["robot", "--scenario", scenario_arg, "--zenoh-listen", robot_ep, *can,
                                                   *common, "--duration", backstop], log_dir)
+        robot_priority = raise_priority(children["robot"].popen.pid)
+        if not wait_listening(robot_ep, children["robot"], STARTUP_TIMEOUT):
+            raise RuntimeError(f"robot did not come up on {robot_ep}")
+        # the console before the controller: its start-up (imports, a CPU burst) is over before the
+        # controller runs its feedback timeout; it connects when the controller listens (Zenoh retries)
+        console_argv = ["console", "--script", scenario_arg, "--zenoh-connect", controller_ep, *common]
+        children["console"] = start_child("console", console_argv + ([] if interactive else ["--headless"]), log_dir,
+                                          interactive=interactive)
         children["controller"] = start_child("controller", ["controller", "--scenario", scenario_arg, *law,
                                                             "--zenoh-listen", controller_ep, *can, *common,
                                                             "--duration", backstop], log_dir)
-        for name, ep in (("robot", robot_ep), ("controller", controller_ep)):
-            if not wait_listening(ep, children[name], STARTUP_TIMEOUT):
-                raise RuntimeError(f"{name} did not come up on {ep}")
+        if not wait_listening(controller_ep, children["controller"], STARTUP_TIMEOUT):
+            raise RuntimeError(f"controller did not come up on {controller_ep}")
         session = open_session(connect=[robot_ep, controller_ep])
         subs = [session.declare_subscriber(keys.truth_key(args.robot_id), rec.on_truth),
                 session.declare_subscriber(keys.state_key(args.robot_id), rec.on_state),
                 session.declare_subscriber(keys.events_key(args.robot_id), rec.on_event)]
-        console_argv = ["console", "--script", scenario_arg, "--zenoh-connect", controller_ep, *common]
-        children["console"] = start_child("console", console_argv + ([] if interactive else ["--headless"]), log_dir,
-                                          interactive=interactive)
         deadline = time.monotonic() + STARTUP_TIMEOUT
         while not rec.in_control.wait(0.1):
             dead = [c.name for c in children.values() if c.popen.poll() is not None]
@@ -427,6 +443,7 @@ def run(args) -> int:
                                                 else udp_errors_after - udp_errors_before)
     summary = {"scenario": scenario.name, "controller": loop.controller.name, "requested_duration": duration, **result,
                "interrupted": stop.stopped, "failure": failure, "settle_seconds": settle,
+               "robot_priority": robot_priority,
                "processes": {name: children[name].report() for name in ("console", "controller", "robot") if name in children},
                "endpoints": {"robot": robot_ep, "controller": controller_ep, "can": " ".join(can[1:])},
                "wall_seconds": time.monotonic() - start}
