@@ -1,0 +1,206 @@
+"""The daemon's per-period logic (services/controller/daemon.py), stepped by hand with an in-memory
+bus and an in-memory Zenoh session: arming, control, estops, re-arm, NonFiniteCommand."""
+import math
+
+import can
+import numpy as np
+import pytest
+
+from sharedctl.models import OmniRobot
+from sharedctl.protocol import cansimple as cs
+from sharedctl.protocol.messages import ControlRequest, Event, OperatorCommand, RobotState
+from sharedctl.protocol.msgpack_codec import decode_message, encode_message
+from sharedctl.protocol.odrive_enums import AxisState, ODriveError
+from sharedctl.services.controller.daemon import ControllerDaemon, DaemonConfig, Mode
+from sharedctl.services.scenario_files import load
+from sharedctl.shared_controller import NonFiniteCommand
+
+PERIOD = 0.002
+
+
+class MemoryBus:
+    def __init__(self):
+        self.sent = []
+
+    def send(self, msg, timeout=None):
+        self.sent.append(cs.decode(msg.arbitration_id, bytes(msg.data), msg.is_remote_frame, dlc=msg.dlc))
+
+    def recv(self, timeout=None):
+        return None
+
+    def take(self):
+        sent, self.sent = self.sent, []
+        return sent
+
+
+class Publisher:
+    def __init__(self):
+        self.payloads = []
+
+    def put(self, payload):
+        self.payloads.append(payload)
+
+    def undeclare(self):
+        pass
+
+
+class MemorySession:
+    """declare_publisher / declare_subscriber / liveliness().declare_token, kept in dicts."""
+
+    def __init__(self):
+        self.publishers, self.callbacks = {}, {}
+
+    def declare_publisher(self, key):
+        return self.publishers.setdefault(key, Publisher())
+
+    def declare_subscriber(self, key, callback):
+        self.callbacks[key] = callback
+        return Publisher()
+
+    def liveliness(self):
+        return self
+
+    def declare_token(self, key):
+        return Publisher()
+
+
+def message(frame):
+    f = cs.encode(frame)
+    return can.Message(arbitration_id=f.arbitration_id, data=f.data, dlc=f.dlc, is_extended_id=False)
+
+
+@pytest.fixture
+def daemon():
+    loop, q0, _ = load("paper_convex").closed_loop("ce")
+    d = ControllerDaemon(DaemonConfig(robot_id="unit", verbose=False), loop, q0, MemoryBus(), MemorySession())
+    d.master.clock = lambda: d.clock_now
+    d.clock_now = 10.0
+    return d
+
+
+def feed(d, now, state=AxisState.CLOSED_LOOP_CONTROL, error=ODriveError.NONE, v_turns=(0.0, 0.0, 0.0), heartbeat=True):
+    for n in (0, 1, 2):
+        d.master.handle(message(cs.GetEncoderEstimates(n, 0.0, v_turns[n])), now)
+        if heartbeat:
+            d.master.handle(message(cs.Heartbeat(n, error, state)), now)
+
+
+def arm(d):
+    d.master.request_arming()
+    d.bus_frames = d.master.bus.take()
+    feed(d, 10.001)
+    d.tick(10.002)
+    assert d.mode is Mode.RUNNING
+
+
+def events(d):
+    return [decode_message(p, expect=Event) for p in d.session.publishers["sharedctl/v1/unit/events"].payloads]
+
+
+def operator(d, seq, now, joystick=(0.0, 0.0, 0.0), estop=False, request=ControlRequest.NONE):
+    cmd = OperatorCommand(operator_id="op", session_id="s", seq=seq, send_time=1.0, joystick=joystick,
+                          q_d=(-0.9, 3.0, 0.0), qd_d=(0.0, 0.0, 0.0), qdd_d=(0.0, 0.0, 0.0), deadman=True,
+                          estop=estop, control_request=request)
+    d.policy.offer(encode_message(cmd), now)
+
+
+def test_arming_sends_zero_torque_until_every_axis_reports_closed_loop(daemon):
+    daemon.master.request_arming()
+    daemon.master.bus.take()
+    daemon.tick(10.001)
+    assert daemon.mode is Mode.ARMING
+    assert daemon.master.bus.take() == [cs.SetInputTorque(n, 0.0) for n in (0, 1, 2)]
+    feed(daemon, 10.002)
+    daemon.tick(10.003)
+    assert daemon.mode is Mode.RUNNING
+
+
+def test_running_turns_the_operator_force_into_wheel_torques(daemon):
+    arm(daemon)
+    daemon.master.bus.take()
+    operator(daemon, 1, 10.003, joystick=(0.5, 0.0, 0.0))
+    feed(daemon, 10.004, heartbeat=False)
+    daemon.tick(10.004)
+    sent = daemon.master.bus.take()
+    tau = np.array([f.input_torque for f in sent])
+    expected = OmniRobot().wheel_torques(np.array([-0.9, 3.0, 0.0]), np.array([10.0, 0.0, 0.0]))
+    np.testing.assert_allclose(tau, expected, rtol=1e-6)
+    assert [f.node_id for f in sent] == [0, 1, 2]
+
+
+def test_torques_above_the_limit_are_scaled_down_keeping_their_direction(daemon):
+    daemon.config.torque_limit = 0.05
+    arm(daemon)
+    daemon.master.bus.take()
+    operator(daemon, 1, 10.003, joystick=(1.0, 0.5, 0.0))
+    daemon.tick(10.003)
+    tau = np.array([f.input_torque for f in daemon.master.bus.take()])
+    expected = OmniRobot().wheel_torques(np.array([-0.9, 3.0, 0.0]), np.array([20.0, 10.0, 0.0]))
+    assert np.max(np.abs(tau)) == pytest.approx(0.05, rel=1e-6)
+    np.testing.assert_allclose(tau / np.max(np.abs(tau)), expected / np.max(np.abs(expected)), rtol=1e-5)
+
+
+def test_feedback_older_than_50_ms_estops_every_axis_and_stops_commanding(daemon):
+    arm(daemon)
+    daemon.master.bus.take()
+    daemon.tick(10.0505)                  # last estimate at 10.001: 49.5 ms, still fine
+    assert daemon.mode is Mode.RUNNING
+    daemon.master.bus.take()
+    daemon.tick(10.0525)
+    assert daemon.mode is Mode.ESTOPPED
+    assert daemon.master.bus.take() == [cs.Estop(n) for n in (0, 1, 2)]
+    daemon.tick(10.054)
+    assert daemon.master.bus.take() == []
+    assert any(e.kind.value == "estop" and "CAN feedback lost" in e.text for e in events(daemon))
+
+
+def test_an_axis_error_while_running_estops(daemon):
+    arm(daemon)
+    feed(daemon, 10.003, state=AxisState.IDLE, error=ODriveError.WATCHDOG_TIMER_EXPIRED)
+    daemon.tick(10.004)
+    assert daemon.mode is Mode.ESTOPPED
+    kinds = {e.kind.value for e in events(daemon)}
+    assert {"watchdog_trip", "estop"} <= kinds
+
+
+def test_non_finite_command_sends_zero_torque_then_estop(daemon, monkeypatch):
+    arm(daemon)
+    daemon.master.bus.take()
+
+    def broken(*args, **kwargs):
+        raise NonFiniteCommand("test")
+    monkeypatch.setattr(daemon.controller, "step", broken)
+    daemon.tick(10.003)
+    assert daemon.master.bus.take() == [cs.SetInputTorque(n, 0.0) for n in (0, 1, 2)] + [cs.Estop(n) for n in (0, 1, 2)]
+    assert daemon.mode is Mode.ESTOPPED
+    assert any("non-finite" in e.text for e in events(daemon))
+
+
+def test_operator_estop_latches_and_a_later_take_rearms(daemon):
+    arm(daemon)
+    operator(daemon, 1, 10.003, estop=True)
+    daemon.tick(10.003)
+    assert daemon.mode is Mode.ESTOPPED
+    operator(daemon, 2, 10.004)                                   # estop released, but no take yet
+    feed(daemon, 10.004, heartbeat=False)
+    daemon.tick(10.004)
+    assert daemon.mode is Mode.ESTOPPED
+    daemon.master.bus.take()
+    operator(daemon, 3, 10.005, request=ControlRequest.TAKE)
+    feed(daemon, 10.005, heartbeat=False)
+    daemon.tick(10.005)
+    assert daemon.mode is Mode.ARMING
+    assert cs.ClearErrors(0) in daemon.master.bus.take()
+    assert any(e.kind.value == "estop_cleared" for e in events(daemon))
+
+
+def test_robot_state_is_published_with_the_link_health(daemon):
+    arm(daemon)
+    operator(daemon, 1, 10.003, joystick=(0.0, 0.25, 0.0))
+    feed(daemon, 10.004, heartbeat=False)
+    daemon.tick(10.005)
+    daemon.publish_state(10.005)
+    state = decode_message(daemon.session.publishers["sharedctl/v1/unit/state"].payloads[-1], expect=RobotState)
+    assert state.u_h == pytest.approx((0.0, 5.0, 0.0)) and state.lease_holder == "op"
+    assert state.link.staleness_ms == pytest.approx(2.0) and state.link.can_feedback_age_ms == pytest.approx(1.0)
+    assert math.isclose(state.k_s, 1.0) and not state.estop_active
