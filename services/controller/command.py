@@ -4,7 +4,7 @@
                          [--can-interface I --can-channel C --can-option k=v …]
                          [--zenoh-listen EP]… [--zenoh-connect EP]… [--robot-id ID]
                          [--rate 500] [--telemetry-rate 50] [--torque-limit 60] [--duration S]
-                         [--feedback-timeout-ms 50] [--priority high|realtime|normal] [--quiet]
+                         [--feedback-timeout-ms 50] [--priority realtime|high|normal] [--quiet]
 """
 from __future__ import annotations
 
@@ -18,7 +18,7 @@ from .. import can_bus, zenoh_session
 from ..lifecycle import StopFlag
 from ..scenario_files import load
 from .daemon import ControllerDaemon, DaemonConfig
-from .priority import LEVELS, raise_priority
+from .priority import LEVELS, make_loop_realtime, raise_nice
 
 PROG = "sharedctl controller"
 
@@ -40,8 +40,9 @@ def add_parser(subparsers) -> None:
     p.add_argument("--torque-limit", type=float, default=60.0, help="wheel torque limit, N·m (default 60)")
     p.add_argument("--feedback-timeout-ms", type=float, default=50.0, help="CAN feedback age that triggers Estop (default 50)")
     p.add_argument("--duration", type=float, help="stop after this many seconds (default: run until SIGINT/SIGTERM)")
-    p.add_argument("--priority", choices=LEVELS, default="high",
-                   help="scheduling: high = nice -10 (default), realtime = also SCHED_FIFO for the loop thread, normal")
+    p.add_argument("--priority", choices=LEVELS, default="realtime",
+                   help="scheduling: realtime = nice -10 and SCHED_FIFO 20 for the loop thread (default; falls back "
+                        "when not permitted), high = nice -10 only, normal")
     p.add_argument("--quiet", action="store_true", help="no warnings on stderr (events are still published)")
     p.set_defaults(handler=run)
 
@@ -64,18 +65,21 @@ def run(args) -> int:
     config = DaemonConfig(
         robot_id=robot_id, rate=args.rate, telemetry_rate=args.telemetry_rate, torque_limit=args.torque_limit,
         feedback_timeout=args.feedback_timeout_ms / 1e3, duration=args.duration, verbose=not args.quiet,
+        realtime=args.priority == "realtime",
     )
     bus = session = daemon = None
-    priority = raise_priority(args.priority)   # before Zenoh and CAN start their threads
+    priority = raise_nice(args.priority)   # before Zenoh and CAN start their threads (they inherit it)
     try:
         bus = can_bus.open_bus(spec)
         session = zenoh_session.open_session(listen, connect)
         daemon = ControllerDaemon(config, loop, q0, bus, session)
+        daemon.realtime = config.realtime and make_loop_realtime()   # this thread runs the loop
         zenoh_desc = " ".join([f"listen {e}" for e in listen] + [f"connect {e}" for e in connect])
         print(
             f"{PROG}: robot {robot_id}, scenario {scenario.name}, controller {loop.controller.name}, "
             f"{config.rate:g} Hz (telemetry {config.telemetry_rate:g} Hz), torque limit {config.torque_limit:g} N·m, "
-            f"CAN {spec.describe()}, Zenoh {zenoh_desc}, priority {priority}",
+            f"CAN {spec.describe()}, Zenoh {zenoh_desc}, priority {priority}"
+            f"{' + SCHED_FIFO loop' if daemon.realtime else ''}",
             flush=True,
         )
         summary = daemon.run(stop)

@@ -60,6 +60,7 @@ class DaemonConfig:
     duration: float | None = None       # s; None: until SIGINT/SIGTERM
     event_interval: float = 1.0         # s between events of one topic
     verbose: bool = True                # warnings and errors to stderr
+    realtime: bool = False              # the loop thread asks for SCHED_FIFO (priority.py)
 
 
 class LatenessHistogram:
@@ -161,6 +162,7 @@ class ControllerDaemon:
         self.histogram = LatenessHistogram()     # tick lateness (jitter)
         self.compute = LatenessHistogram()       # tick compute time (control + telemetry)
         self.late = 0
+        self.realtime = False
         self._declare(session)
 
     # ------------------------------------------------------------------ Zenoh

@@ -1,37 +1,42 @@
 """Scheduling priority for the control loop (a 500 Hz loop must not wait behind batch jobs).
 
-`high` lowers the process's nice value to −10 (inherited by threads created afterwards: call it
-before opening Zenoh and CAN); `realtime` additionally puts the calling thread (the control
-loop) in SCHED_FIFO at priority 20. The loop sleeps most of each period, and the kernel's RT
-throttling (sched_rt_runtime_us) still bounds an RT thread that would not. Both fall back
-quietly when the process may not raise its priority; the result is reported.
+Two steps, so that only the loop thread runs real-time:
+* `raise_nice()` — before Zenoh and CAN start their threads: nice −10 for the process (threads
+  created afterwards inherit it);
+* `make_loop_realtime()` — in the loop thread, after the session and the bus are open: SCHED_FIFO
+  at priority 20 for that thread alone (Zenoh's threads keep the normal policy). The loop sleeps
+  most of each period, and the kernel's RT throttling (sched_rt_runtime_us) still bounds an RT
+  thread that would not.
+Both fall back quietly when the process may not raise its priority; what was obtained is reported.
 """
 from __future__ import annotations
 
 import os
 
-LEVELS = ("normal", "high", "realtime")
+LEVELS = ("realtime", "high", "normal")
 NICE = -10
 FIFO_PRIORITY = 20
 
 
-def raise_priority(level: str) -> str:
-    """Apply `level`; return what was obtained (e.g. "nice -10", "SCHED_FIFO 20", "normal")."""
+def raise_nice(level: str) -> str:
+    """nice −10 for `high` and `realtime`; returns e.g. "nice -10" or "normal"."""
     if level not in LEVELS:
         raise ValueError(f"priority must be one of {LEVELS}, got {level!r}")
-    obtained = "normal"
-    if level in ("high", "realtime"):
-        try:
-            current = os.nice(0)
-            if current > NICE:
-                os.nice(NICE - current)
-            obtained = f"nice {os.nice(0)}"
-        except (OSError, AttributeError):
-            pass
-    if level == "realtime":
-        try:
-            os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(FIFO_PRIORITY))
-            obtained = f"SCHED_FIFO {FIFO_PRIORITY}"
-        except (OSError, AttributeError):
-            pass
-    return obtained
+    if level == "normal":
+        return "normal"
+    try:
+        current = os.nice(0)
+        if current > NICE:
+            os.nice(NICE - current)
+        return f"nice {os.nice(0)}"
+    except (OSError, AttributeError):
+        return "normal"
+
+
+def make_loop_realtime() -> bool:
+    """SCHED_FIFO for the calling thread; False if not permitted."""
+    try:
+        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(FIFO_PRIORITY))
+        return True
+    except (OSError, AttributeError):
+        return False
