@@ -60,6 +60,7 @@ class CanMaster:
     nodes: tuple[int, ...] = DEFAULT_WHEEL_NODES
     arm_timeout: float = 0.5                     # s to see CLOSED_LOOP heartbeats before retrying
     clock: object = time.monotonic
+    wall_clock: object = time.time
     axes: dict = field(init=False)
     rx_frames: int = 0
     tx_frames: int = 0
@@ -150,7 +151,14 @@ class CanMaster:
                     return count
                 continue
             count += 1
-            self.handle(msg, self.clock())
+            self.handle(msg, self.arrival_time(msg))
+
+    def arrival_time(self, msg) -> float:
+        """When the frame reached the socket, on `clock`: the interface's receive timestamp (wall clock,
+        kernel-stamped on udp_multicast and SocketCAN) moved onto `clock`; now if it is implausible."""
+        now = self.clock()
+        lag = self.wall_clock() - (msg.timestamp or 0.0)
+        return now - lag if 0.0 <= lag < 1.0 else now
 
     def handle(self, msg, now: float) -> None:
         """One received python-can message: decode, ignore our own direction, update the axes."""

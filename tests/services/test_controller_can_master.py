@@ -121,3 +121,14 @@ def test_send_errors_are_counted_not_raised():
     master = CanMaster(FailingBus())
     master.send_torques([0.0, 0.0, 0.0])
     assert master.tx_errors["CanOperationError"] == 3 and master.tx_frames == 0
+
+
+def test_arrival_time_uses_the_interface_receive_timestamp():
+    master = CanMaster(MemoryBus(), clock=lambda: 50.0, wall_clock=lambda: 1000.0)
+    msg = message(cs.GetEncoderEstimates(0, 0.0, 0.0))
+    msg.timestamp = 999.996                       # stamped 4 ms before we read it
+    assert master.arrival_time(msg) == pytest.approx(49.996)
+    msg.timestamp = 0.0                           # no timestamp: the time it was read
+    assert master.arrival_time(msg) == 50.0
+    msg.timestamp = 1000.5                        # from the future (clock mismatch): the time it was read
+    assert master.arrival_time(msg) == 50.0
