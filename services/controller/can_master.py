@@ -136,10 +136,10 @@ class CanMaster:
             self.send(cs.SetAxisState(n, AxisState.IDLE))
 
     # --------------------------------------------------------------- receive
-    def receive_until(self, deadline: float) -> int:
-        """Read and handle frames until `deadline` (clock time); returns how many were read."""
+    def receive_until(self, deadline: float, max_frames: int = 2000) -> int:
+        """Read and handle frames until `deadline` (clock time), at most `max_frames`; returns how many were read."""
         count = 0
-        while True:
+        while count < max_frames:
             remaining = deadline - self.clock()
             try:
                 msg = self.bus.recv(timeout=max(remaining, 0.0))
@@ -152,6 +152,7 @@ class CanMaster:
                 continue
             count += 1
             self.handle(msg, self.arrival_time(msg))
+        return count
 
     def arrival_time(self, msg) -> float:
         """When the frame reached the socket, on `clock`: the interface's receive timestamp (wall clock,

@@ -43,6 +43,8 @@ class WheelOdometry:
     model: object                      # OmniRobot: input_matrix, body_velocity_from_wheels
     q0: np.ndarray
     source: str = "position"           # "position" (angle increments) or "velocity" (trapezoid on q̇)
+    max_step_turns: float = 2.0        # a larger wheel increment between updates is a discontinuity (drive reset)
+    discontinuities: int = field(init=False, default=0)
     q: np.ndarray = field(init=False)
     v: np.ndarray = field(init=False)
     updates: int = field(init=False, default=0)
@@ -66,6 +68,9 @@ class WheelOdometry:
         pos = np.array([e.pos_turns for e in estimates], dtype=float)
         newest = max(e.received for e in estimates)
         v_new = self.model.body_velocity_from_wheels(self.q, self.wheel_speeds(estimates))
+        if self._last_pos is not None and np.max(np.abs(pos - self._last_pos)) > self.max_step_turns:
+            self.discontinuities += 1       # e.g. a drive restarted from 0 turns: re-baseline, keep the pose
+            self._last_pos = None
         if self._last_pos is not None:
             if self.source == "position":
                 self.q = self._integrate_angles(TWO_PI * (pos - self._last_pos))

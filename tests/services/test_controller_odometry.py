@@ -70,3 +70,12 @@ def test_feedback_age_is_per_axis_and_infinite_before_any_estimate():
     assert ages[0] == pytest.approx(0.05)
     assert math.isinf(ages[1])
     assert ages[2] == pytest.approx(0.01)
+
+
+def test_a_wheel_position_jump_is_a_discontinuity_not_a_motion():
+    q0 = np.array([-0.9, 3.0, 0.0])
+    odo = WheelOdometry(MODEL, q0)
+    odo.update(encoder_estimates(q0, np.zeros(3), np.array([500.0, 500.0, 500.0]), 0.0))
+    q, _ = odo.update(encoder_estimates(q0, np.zeros(3), np.zeros(3), 0.002))   # drive restarted at 0 turns
+    np.testing.assert_array_equal(q, q0)
+    assert odo.discontinuities == 1
