@@ -70,6 +70,8 @@ def add_parser(subparsers) -> None:
     p.add_argument("--json", metavar="OUT", help="write the summary as JSON to OUT ('-' for stdout)")
     p.add_argument("--zenoh-listen", metavar="ENDPOINT", help="the controller's endpoint (default: a free loopback port)")
     p.add_argument("--robot-id", default="robot1", help="robot id in the key expressions (default robot1)")
+    p.add_argument("--feedback-timeout-ms", type=float, metavar="MS",
+                   help="passed to the controller: CAN feedback age that triggers Estop (default: the controller's, 50)")
     p.add_argument("--no-reference", action="store_true", help="skip the in-process sampled reference run")
     p.add_argument("--log-dir", metavar="DIR", help="keep the children's output here (default: a temporary directory, removed on success)")
     p.set_defaults(handler=run)
@@ -379,6 +381,8 @@ def run(args) -> int:
     scenario_arg = str(Path(args.scenario).resolve()) if Path(args.scenario).exists() else args.scenario
     backstop = str(duration + STARTUP_TIMEOUT + 30.0)    # children stop by themselves should this demo die
     law = ["--controller", args.controller] if args.controller else []
+    if args.feedback_timeout_ms is not None:
+        law += ["--feedback-timeout-ms", str(args.feedback_timeout_ms)]
     log_dir = Path(args.log_dir) if args.log_dir else Path(tempfile.mkdtemp(prefix="sharedctl-demo-"))
     log_dir.mkdir(parents=True, exist_ok=True)
     common = ["--robot-id", args.robot_id]

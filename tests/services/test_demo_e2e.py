@@ -22,6 +22,11 @@ from sharedctl.services.demo_command import TOLERANCE
 
 pytestmark = pytest.mark.slow
 RUNS = {"paper_convex": 20.0, "paper_nonconvex": 30.0}
+# The controller's CAN feedback timeout, relaxed from its default 50 ms: the simulated robot is a
+# Python process, and on a shared 2-core host its encoder stream was measured to pause 45–70 ms
+# (a passive listener on the bus, robot at nice −10), which trips 50 ms. 150 ms stays above the
+# drives' own 0.1 s watchdog. What is under test is the distributed shared control.
+FEEDBACK_TIMEOUT = ("--feedback-timeout-ms", "150")
 
 
 def alive(pid: int) -> bool:
@@ -46,7 +51,7 @@ def run_demo(tmp_path: Path, *args: str, timeout: float = 150.0) -> tuple[subpro
 @pytest.fixture(scope="module", params=sorted(RUNS))
 def demo(request, tmp_path_factory):
     scenario = request.param
-    proc, summary = run_demo(tmp_path_factory.mktemp(scenario), "--scenario", scenario)
+    proc, summary = run_demo(tmp_path_factory.mktemp(scenario), "--scenario", scenario, *FEEDBACK_TIMEOUT)
     assert summary, f"no summary: {proc.stdout}\n{proc.stderr}"
     return scenario, proc, summary
 
@@ -100,7 +105,7 @@ def test_sigterm_to_the_demo_stops_every_child_and_leaves_none(tmp_path):
     out = tmp_path / "demo.json"
     demo = subprocess.Popen(
         [sys.executable, "-m", "sharedctl.services.cli", "demo", "--headless", "--no-reference", "--duration", "60",
-         "--json", str(out), "--log-dir", str(tmp_path / "logs")],
+         *FEEDBACK_TIMEOUT, "--json", str(out), "--log-dir", str(tmp_path / "logs")],
         stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, stderr=subprocess.STDOUT)
     try:
         time.sleep(8.0)                         # started, the operator driving
