@@ -411,11 +411,11 @@ def run(args) -> int:
         if not wait_listening(controller_ep, children["controller"], STARTUP_TIMEOUT):
             raise RuntimeError(f"controller did not come up on {controller_ep}")
         session = open_session(connect=[robot_ep, controller_ep])
-        subs = [session.declare_subscriber(keys.truth_key(args.robot_id), rec.on_truth),
+        subscribers = [session.declare_subscriber(keys.truth_key(args.robot_id), rec.on_truth),
                 session.declare_subscriber(keys.state_key(args.robot_id), rec.on_state),
                 session.declare_subscriber(keys.events_key(args.robot_id), rec.on_event)]
         deadline = time.monotonic() + STARTUP_TIMEOUT
-        while not rec.in_control.wait(0.1):
+        while subscribers and not rec.in_control.wait(0.1):
             dead = [c.name for c in children.values() if c.popen.poll() is not None]
             if dead or stop.stopped or time.monotonic() > deadline:
                 raise RuntimeError(f"{', '.join(dead)} exited early" if dead else "interrupted" if stop.stopped
@@ -433,7 +433,8 @@ def run(args) -> int:
         settle = None
         if "console" in children:
             children["console"].stop()
-            if children["controller"].popen.poll() is None:
+            controller = children.get("controller")
+            if controller is not None and controller.popen.poll() is None:
                 settle = rec.wait_at_rest(SETTLE_SPEED, SETTLE_TIMEOUT)
         for name in ("controller", "robot"):
             if name in children:
