@@ -8,7 +8,7 @@ Keys (all SI; see docs/scenarios.md):
   [initial]  q, qdot
   [desired]  kind = "line" (start, velocity) | "circle" (center, radius, omega)
   [human]    kind = "scripted" | "spring", kp, kd
-  [sharing]  mode = "shared" | "machine" | "human", b1, b2, blend_time_constant
+  [sharing]  mode = "shared" | "machine" | "human", b1, b2, b0, blend_time_constant, min_machine_dwell
   [reference] epsilon, gamma
   [gains.ce] Kp, lam, gamma_theta   [gains.nce] lam, k_q, alpha_n, gamma_n
   [gains.of] K1, k2, gamma_theta, sign_width   [gains.observer] Ka, Kb, sign_width
@@ -154,13 +154,19 @@ def build(data: dict, controller: str | None):
 
     sharing = data.get("sharing", {})
     try:
-        bands = Bands(_number(sharing, "b1", 0.3, "sharing."), _number(sharing, "b2", 0.6, "sharing."))
+        bands = Bands(_number(sharing, "b1", 0.3, "sharing."), _number(sharing, "b2", 0.6, "sharing."),
+                      _number(sharing, "b0", 0.025, "sharing."))
         mode = Mode(sharing.get("mode", "shared"))
         ref = data.get("reference", {})
         shape = ReferenceShape(_number(ref, "epsilon", 0.05, "reference."), _number(ref, "gamma", 40.0, "reference."))
     except ValueError as exc:
         raise ScenarioError(f"sharing/reference: {exc}") from None
-    params = SharingParameters(bands, _number(sharing, "blend_time_constant", 0.3, "sharing.", True), mode)
+    if bands.b0 >= shape.epsilon:
+        raise ScenarioError("sharing.b0 must be smaller than reference.epsilon (the projection must lie outside the inner band)")
+    dwell = sharing.get("min_machine_dwell", 0.25)
+    if isinstance(dwell, bool) or not isinstance(dwell, (int, float)) or not (0 <= dwell < 1e3):
+        raise ScenarioError("sharing.min_machine_dwell must be a number of seconds >= 0")
+    params = SharingParameters(bands, _number(sharing, "blend_time_constant", 0.3, "sharing.", True), mode, float(dwell))
 
     kind_ctrl = controller or data.get("controller", "ce")
     try:

@@ -12,6 +12,13 @@ is hazardous and HYSTERESIS otherwise. Because f_b2 < f_b1 on (−b1, 0), a row 
 the whole band between the two curves to go from safe to hazardous — the room the
 Schmitt trigger of sharing.py needs.
 
+The inner band b0 (an addition to Definition 2): f_b1(x) ≈ |x|/b1² near a face, so an approach
+at speed s is first hazardous only s·b1²/(1 + s·b1) from the face — 0.27 mm at 3 mm/s. A law
+whose forces grow like 1/x there (every law of the paper) then acts at a distance no sampled
+or numerically integrated loop can follow. Any approach within b0 of a face is therefore
+hazardous too, so the machine takes over at least b0 from it. b0 < ε keeps the projected
+reference (at −ε) outside the inner band. b0 = 0 gives Definition 2 as printed.
+
 For a union of polytopes (non-convex Q_a) the state is SAFE if it is safe with respect to
 some polytope that contains q (the robot can stay in that one), HAZARD if it is hazardous
 with respect to every polytope that contains q (it is about to leave the union), and
@@ -37,14 +44,18 @@ class SetClass(enum.IntEnum):
 
 @dataclass(frozen=True)
 class Bands:
-    """b1 < b2: the widths (in constraint units, metres for unit rows) of the two bands."""
+    """b1 < b2: the widths (in constraint units, metres for unit rows) of the two bands;
+    b0 < b1: the inner band in which any approach is hazardous (0 = Definition 2 as printed)."""
 
     b1: float = 0.3
     b2: float = 0.6
+    b0: float = 0.025
 
     def __post_init__(self):
         if not (0.0 < self.b1 < self.b2):
             raise ValueError(f"need 0 < b1 < b2, got b1={self.b1}, b2={self.b2}")
+        if not (0.0 <= self.b0 < self.b1):
+            raise ValueError(f"need 0 <= b0 < b1, got b0={self.b0}")
 
 
 def allowance(x: np.ndarray, b: float) -> np.ndarray:
@@ -57,8 +68,9 @@ def allowance(x: np.ndarray, b: float) -> np.ndarray:
 
 
 def hazardous_rows(x: np.ndarray, x_dot: np.ndarray, bands: Bands) -> np.ndarray:
-    """Boolean per row: −b1 ≤ x < 0 and ẋ ≥ f_b1(x)."""
-    return (x >= -bands.b1) & (x < 0.0) & (x_dot >= allowance(x, bands.b1))
+    """Boolean per row: −b1 ≤ x < 0 and ẋ ≥ f_b1(x), or −b0 ≤ x < 0 and ẋ > 0 (the inner band)."""
+    near = (x < 0.0) & (x >= -bands.b1)
+    return near & ((x_dot >= allowance(x, bands.b1)) | ((x >= -bands.b0) & (x_dot > 0.0)))
 
 
 def unsafe_rows(x: np.ndarray, x_dot: np.ndarray, bands: Bands) -> np.ndarray:

@@ -114,6 +114,8 @@ class SharedController:
                 law_next = law_state + dt * out.state_dot
                 if decision.authority is Authority.MACHINE:
                     theta_next = theta_hat + dt * out.theta_dot
+                    if law.projects_estimate:
+                        theta_next = model.project(theta_next)
             else:
                 u_f = self.recovery_force(grp, q, v_used)
         if decision.authority is Authority.HUMAN:

@@ -13,7 +13,7 @@ Minimum dwell. Near a face both allowance curves of Definition 2 go to zero, so 
 hysteresis band between them is thin: the machine's first push reverses the approach and
 puts the state straight back in the safe set. Read literally, (46) then hands authority
 back at once and, with an operator pushing into the face, switches at the sample rate
-(Zeno in continuous time; tests/test_sharing_hysteresis.py keeps the measurement). The
+(Zeno in continuous time; tests/test_sharing_properties.py keeps the measurement). The
 machine therefore keeps authority for at least Δt = min_machine_dwell after taking over
 (Theorem 5 assumes such a Δt > 0). Transparency holds whenever k_s = 1, and k_s = 1 in
 the safe set except within Δt of an intervention.

@@ -249,6 +249,8 @@ def simulate(loop: ClosedLoop, q0, v0, duration: float, dt: float) -> Trace:
         q, v, theta_hat, law_state, obs = (
             s + (dt / 6.0) * (a + 2.0 * b + 2.0 * c + d) for s, a, b, c, d in zip(state, d1, d2, d3, d4)
         )
+        if law is not None and law.projects_estimate:
+            theta_hat = model.project(theta_hat)
         if not all(np.all(np.isfinite(x)) for x in (q, v, theta_hat, law_state, obs)):
             finite = False
             k += 1

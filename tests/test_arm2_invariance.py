@@ -36,25 +36,13 @@ def assert_invariant(case, controller):
     return trace
 
 
-# Known failures (commit 915f504), reproduced exactly by the case named in each message.
-ARM_DIVERGES = pytest.mark.xfail(strict=True, reason=(
-    "arm2, dt = 2e-3: the CE law (12) (hazard law of ce, nce and of) diverges near a joint limit. "
-    "down-left: the arm sags under gravity into q1 >= -0.8 while the desired is 0.35 rad inside, "
-    "the first hazard sample is 21 mm (rad) from the limit, u_f = (170, 0.5) N m with theta_hat = 0, "
-    "one step later qdot = (4.0, -19.2) rad/s, u_f = 3.4e3 N m and the state leaves the box. "
-    "up-right: theta_hat adapted during MACHINE samples leaves the physical set "
-    "(theta_3 = -1.29: M(theta_hat) indefinite); the Y theta_hat term then acts as negative damping "
-    "~1/|x| and qdot reaches -232 rad/s at t = 3.50 s. Also fails in Mode.MACHINE and at dt = 5e-4."))
-BOX_FAILS = {("down-left", "ce"), ("down-left", "nce"), ("down-left", "of"), ("up-right", "ce"), ("up-right", "nce")}
-
-
-@pytest.mark.parametrize("line,controller", [
-    pytest.param(line, c, marks=ARM_DIVERGES if (line, c) in BOX_FAILS else ())
-    for line in sorted(LINES) for c in S.CONTROLLERS
-])
+@pytest.mark.parametrize("line,controller", [(line, c) for line in sorted(LINES) for c in S.CONTROLLERS])
 def test_arm_joint_box_stays_inside(line, controller):
     """−0.8 ≤ q1 ≤ 1.2, −0.3 ≤ q2 ≤ 2.0 from q0 = (0.2, 0.8) at rest; the desired line
-    leaves through the upper corner (up-right) or the lower corner (down-left)."""
+    leaves through the upper corner (up-right) or the lower corner (down-left). These failed
+    before the parameter projection (θ̂₃ adapted to −1.29: an indefinite estimated inertia)
+    and the inner hazard band (the machine first acted 21 mrad from a limit, under gravity,
+    with gains the 2 ms step could not follow)."""
     trace = assert_invariant(S.arm_box_case(LINES[line]), controller)
     assert np.any(trace.set_class == int(SetClass.HAZARD))
 
@@ -67,9 +55,6 @@ def test_arm_union_of_two_boxes_stays_inside(controller):
     assert np.any(trace.set_class == int(SetClass.HAZARD))
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "random_arm_box_case(2222443), nce (the first example): same divergence as "
-    "test_arm_joint_box_stays_inside — the state leaves the box at t = 2.89 s through q1 >= -0.89."))
 @settings(max_examples=3, **S.SIM_SETTINGS)
 @given(case=S.arm_box_cases, controller=S.controllers)
 def test_random_arm_box_stays_inside(case, controller):
@@ -86,7 +71,7 @@ def test_arm_sharing_properties_hold():
     assert np.any(trace.set_class == int(SetClass.HAZARD))
     assert np.any(trace.authority == int(Authority.SHARED))
     assert S.release_samples(trace).size > 0
-    assert S.sharing_failures(trace, case.sharing, S.DT) == []
+    assert S.sharing_failures(trace, case.sharing, S.case_dt(case)) == []
     assert S.takeover_samples(trace).size <= case.duration / case.sharing.min_machine_dwell + 1
 
 

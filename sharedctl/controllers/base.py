@@ -31,6 +31,9 @@ class MachineLaw(ABC):
     name: str
     #: λ_q of (11): sets p and the selection Lyapunov value
     lam: float = 1.0
+    #: whether θ̂ may be projected onto the model's parameter box after each step (gradient
+    #: laws: yes; (13)'s θ̂ is half of an estimate θ̂ + β and its identities forbid it)
+    projects_estimate: bool = True
 
     @abstractmethod
     def state_size(self, model: EulerLagrangeModel) -> int:

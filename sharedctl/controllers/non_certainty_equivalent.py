@@ -12,7 +12,7 @@ so with θ̃ = θ̂ + β − θ:  ṗ_n = −k_q p_n − M⁻¹ W_n θ̃ and θ�
 The estimate this law stands for is θ̂ + β.
 
 This law has no term that grows near a face, so on its own it does not keep the state
-inside (docs/control.md §4.3 and tests/test_nce_safety.py show a crossing). The sharing
+inside (docs/control.md §4.2 and tests/test_non_certainty_equivalent.py show a crossing). The sharing
 arbiter therefore never applies it in the hazardous set: there the certainty-equivalent
 law (12) takes over, seeded with θ̂ + β.
 """
@@ -35,6 +35,7 @@ class NonCertaintyEquivalentLaw(MachineLaw):
     alpha_n: float = 3.0
     gamma_n: float = 200.0
     name: str = field(default="nce", init=False)
+    projects_estimate: bool = field(default=False, init=False)
 
     def __post_init__(self):
         if abs(self.alpha_n - self.k_q) < 1e-9:

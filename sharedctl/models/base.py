@@ -27,6 +27,19 @@ class EulerLagrangeModel(ABC):
     parameter_names: tuple[str, ...]
     #: recommended machine-law gains for this plant's inertia scale, per law name
     default_gains: dict = {}
+    #: a box known to contain θ (physically plausible values); adaptive laws project onto it
+    theta_lower: tuple = ()
+    theta_upper: tuple = ()
+
+    def project(self, theta_hat: np.ndarray) -> np.ndarray:
+        """Euclidean projection of an estimate onto the parameter box (identity if none is set).
+
+        The box is convex and contains θ, so projecting never increases |θ̂ − θ|: the
+        θ̃ part of a Lyapunov function cannot grow by it.
+        """
+        if not self.theta_lower:
+            return theta_hat
+        return np.clip(theta_hat, self.theta_lower, self.theta_upper)
 
     @property
     @abstractmethod

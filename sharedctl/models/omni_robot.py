@@ -49,6 +49,9 @@ class OmniRobot(EulerLagrangeModel):
     n_theta = 3
     coordinate_names = ("x", "y", "psi")
     parameter_names = ("m1", "m3", "a")
+    # a wheeled robot of up to ~200 kg: m1 (kg), m3 (kg m²), a (kg); 0 admits the paper's θ̂(0) = 0
+    theta_lower = (0.0, 0.0, 0.0)
+    theta_upper = (200.0, 50.0, 100.0)
 
     @property
     def theta(self) -> np.ndarray:

@@ -56,9 +56,13 @@ class PlanarArm(EulerLagrangeModel):
     n_theta = 5
     coordinate_names = ("q1", "q2")
     parameter_names = ("theta1", "theta2", "theta3", "theta4", "theta5")
-    # link inertias are ~0.1 kg m²: the omnidirectional robot's gains would be stiff here
+    # positive inertias and gravity moments of an arm of up to ~10 kg and ~2 m
+    theta_lower = (0.0, 0.0, 0.0, 0.0, 0.0)
+    theta_upper = (20.0, 10.0, 10.0, 200.0, 100.0)
+    # link inertias are ~0.1 kg m²: the omnidirectional robot's gains would be stiff here,
+    # and so would its adaptation rate (Y grows like 1/|x| near a joint limit)
     default_gains = {
-        "ce": {"Kp": 5.0, "lam": 1.5, "gamma_theta": 0.5},
+        "ce": {"Kp": 5.0, "lam": 1.5, "gamma_theta": 5.0},
         "nce": {"gamma_n": 20.0},
         "of": {"stiffness": 3.0},
     }
