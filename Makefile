@@ -17,7 +17,7 @@ $(STAMP): pyproject.toml requirements.lock
 
 demo: $(STAMP)
 	mkdir -p out
-	$(BIN)/sharedctl sim paper_convex --json out/demo.json --plot out/demo.png
+	$(BIN)/sharedctl demo --scenario paper_convex --json out/demo.json
 
 test: $(STAMP)
 	$(BIN)/python -m pytest

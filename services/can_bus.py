@@ -75,9 +75,34 @@ def resolve(interface: str | None, channel: str | None, options: dict | None = N
     return BusSpec(interface, channel, options)
 
 
+#: receive buffer asked for on udp_multicast sockets: the default (~208 KiB) overflows when a
+#: reader stalls for a few tens of milliseconds behind 3,000 frames/s
+UDP_RECEIVE_BUFFER = 4 * 1024 * 1024
+
+
 def open_bus(spec: BusSpec) -> can.BusABC:
     """Open the bus; the caller must `shutdown()` it."""
-    return can.Bus(interface=spec.interface, channel=spec.channel, **spec.options)
+    bus = can.Bus(interface=spec.interface, channel=spec.channel, **spec.options)
+    if spec.interface == "udp_multicast":
+        _enlarge_receive_buffer(bus)
+    return bus
+
+
+def _enlarge_receive_buffer(bus) -> None:
+    """Best effort: SO_RCVBUFFORCE (needs CAP_NET_ADMIN), else SO_RCVBUF (capped by rmem_max)."""
+    import socket
+
+    sock = getattr(getattr(bus, "_multicast", None), "_socket", None)
+    if sock is None:
+        return
+    for option in (getattr(socket, "SO_RCVBUFFORCE", None), socket.SO_RCVBUF):
+        if option is None:
+            continue
+        try:
+            sock.setsockopt(socket.SOL_SOCKET, option, UDP_RECEIVE_BUFFER)
+            return
+        except OSError:
+            continue
 
 
 def add_arguments(parser) -> None:
