@@ -19,7 +19,7 @@ from .constraints import FeasibleSet
 from .models import EulerLagrangeModel
 from .reference import ReferenceShape
 from .sets import SetClass
-from .sharing import ArbiterState, Authority, LawRole, Mode, SharingParameters, arbitrate, select_group
+from .sharing import ArbiterState, Authority, LawRole, Mode, SharingParameters, arbitrate, select_group, shared_input
 from .simulator import MachineController
 from .transform import Desired, all_groups, coordinates
 
@@ -118,12 +118,7 @@ class SharedController:
                         theta_next = model.project(theta_next)
             else:
                 u_f = self.recovery_force(grp, q, v_used)
-        if decision.authority is Authority.HUMAN:
-            u_s = u_h
-        elif decision.authority is Authority.MACHINE:
-            u_s = u_f
-        else:
-            u_s = decision.k_h * u_h + decision.k_f * u_f
+        u_s = shared_input(decision, u_h, u_f)
 
         observer_next = state.observer + dt * observer.derivative(q, state.observer) if observer else state.observer
         ref_group = decision.group if engaged else select_group(feasible, decision.situation, values.__getitem__, ref_ok)

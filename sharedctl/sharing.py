@@ -231,3 +231,12 @@ def arbitrate(
     )
     decision = Decision(authority, group, role, k_h, k_f, situation, group_changed, role != state.role)
     return new_state, decision
+
+
+def shared_input(decision: Decision, u_h: np.ndarray, u_f: np.ndarray) -> np.ndarray:
+    """u_s of (46)/(47) under a decision: u_h (k_s = 1), u_f (hazardous), or k_h u_h + k_f u_f."""
+    if decision.authority is Authority.HUMAN:
+        return u_h
+    if decision.authority is Authority.MACHINE:
+        return u_f
+    return decision.k_h * u_h + decision.k_f * u_f

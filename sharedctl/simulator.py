@@ -29,7 +29,7 @@ from .controllers import (
 from .human import HumanModel
 from .models import EulerLagrangeModel
 from .reference import ReferenceShape
-from .sharing import ArbiterState, Authority, LawRole, Mode, SharingParameters, arbitrate, select_group
+from .sharing import ArbiterState, Authority, LawRole, Mode, SharingParameters, arbitrate, select_group, shared_input
 from .transform import all_groups, coordinates
 
 
@@ -178,12 +178,7 @@ def simulate(loop: ClosedLoop, q0, v0, duration: float, dt: float) -> Trace:
             u_f, s_dot = out.u, out.state_dot
             if decision.authority is Authority.MACHINE:
                 th_dot = out.theta_dot
-        if decision.authority is Authority.HUMAN:
-            u_s = u_h
-        elif decision.authority is Authority.MACHINE:
-            u_s = u_f
-        else:
-            u_s = decision.k_h * u_h + decision.k_f * u_f
+        u_s = shared_input(decision, u_h, u_f)
         acc = model.acceleration(q_, v_, u_s)
         o_dot = observer.derivative(q_, o_) if observer else o_
         derivs = (v_, acc, th_dot, s_dot, o_dot)
