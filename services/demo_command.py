@@ -27,7 +27,6 @@ console starts its script on its first RobotState, ~20–40 ms earlier).
 """
 from __future__ import annotations
 
-import json
 import shutil
 import sys
 import tempfile
@@ -41,6 +40,7 @@ from .children import Child, free_udp_port, raise_priority, start_child, udp_rec
 from .demo_measure import TOLERANCE, Recorder, deviation, measure, plant_reference_run, reference_run
 from .lifecycle import StopFlag
 from .scenario_files import load
+from .summary_output import emit
 from .zenoh_session import EndpointError, check_loopback, free_loopback_port, open_session
 
 STARTUP_TIMEOUT = 30.0    # s until the operator is in control
@@ -171,13 +171,7 @@ def run(args) -> int:
 
 
 def _report(summary: dict, args, children: dict, log_dir: Path) -> None:
-    text = json.dumps(summary, indent=2)
-    if args.json == "-":
-        print(text)
-    else:
-        if args.json:
-            Path(args.json).write_text(text + "\n")
-        _print_table(summary)
+    emit(summary, args.json, _print_table)
     if not summary["ok"]:
         for child in children.values():
             if not child.clean and child.tail():

@@ -1,15 +1,14 @@
 """`sharedctl sim SCENARIO.toml [--controller ce|nce|of] [--json OUT] [--plot OUT.png]`."""
 from __future__ import annotations
 
-import json
 import sys
-from pathlib import Path
 
 from sharedctl.metrics import summarize
 from sharedctl.scenario import ScenarioError
 from sharedctl.simulator import simulate
 
 from .scenario_files import load
+from .summary_output import emit
 
 
 def add_parser(subparsers) -> None:
@@ -32,13 +31,7 @@ def run(args) -> int:
     duration = args.duration or scenario.duration
     trace = simulate(loop, q0, v0, duration, scenario.dt)
     summary = {"scenario": scenario.name, "controller": loop.controller.name, **summarize(trace, scenario.dt)}
-    text = json.dumps(summary, indent=2)
-    if args.json == "-":
-        print(text)
-    else:
-        if args.json:
-            Path(args.json).write_text(text + "\n")
-        _print_table(summary)
+    emit(summary, args.json, _print_table)
     if args.plot:
         from .figures import run_figure
 

@@ -30,6 +30,8 @@ from sharedctl.protocol.msgpack_codec import decode_message, encode_message
 from sharedctl.protocol.odrive_enums import AxisState, ControlMode, InputMode, ODriveError
 from sharedctl.services import can_bus, zenoh_session
 
+from .processes import reap, wait_for
+
 NODES = (0, 1, 2)
 ROBOT_FRAMES = (cs.Heartbeat, cs.GetEncoderEstimates, cs.GetError, cs.GetIq, cs.GetBusVoltageCurrent, cs.GetTorques)
 
@@ -185,23 +187,7 @@ def daemon_factory():
         return proc
 
     yield factory
-    for proc in started:                                # reap only what this test started
-        if proc.poll() is None:
-            proc.terminate()
-            try:
-                proc.wait(timeout=3)
-            except subprocess.TimeoutExpired:
-                proc.kill()
-                proc.wait(timeout=3)
-
-
-def wait_for(predicate, timeout: float, what: str) -> None:
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        if predicate():
-            return
-        time.sleep(0.01)
-    raise AssertionError(f"timed out after {timeout} s waiting for {what}")
+    reap(started)                                       # reap only what this test started
 
 
 def sigterm_and_wait(proc) -> tuple[float, str, str]:

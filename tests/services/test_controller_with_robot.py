@@ -24,6 +24,9 @@ from sharedctl.protocol.msgpack_codec import decode_message, encode_message
 from sharedctl.protocol.odrive_enums import AxisState
 from sharedctl.services import can_bus, zenoh_session
 
+from .processes import reap
+from .processes import wait_for as _wait_for
+
 NODES = (0, 1, 2)
 
 
@@ -69,24 +72,8 @@ class BusListener(threading.Thread):
         self.bus.shutdown()
 
 
-def reap(procs) -> None:
-    for proc in procs:
-        if proc.poll() is None:
-            proc.terminate()
-            try:
-                proc.wait(timeout=3)
-            except subprocess.TimeoutExpired:
-                proc.kill()
-                proc.wait(timeout=3)
-
-
 def wait_for(predicate, timeout: float, what: str) -> None:
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        if predicate():
-            return
-        time.sleep(0.02)
-    raise AssertionError(f"timed out after {timeout} s waiting for {what}")
+    _wait_for(predicate, timeout, what, poll=0.02)
 
 
 @pytest.fixture
