@@ -7,7 +7,9 @@ from pathlib import Path
 
 from sharedctl.scenario import Scenario, ScenarioError, parse
 
-PACKAGED = ("paper_convex", "paper_nonconvex")
+PACKAGED = tuple(sorted(entry.name.removesuffix(".toml")
+                        for entry in resources.files("sharedctl").joinpath("scenarios").iterdir()
+                        if entry.name.endswith(".toml")))
 
 
 def load(path_or_name: str) -> Scenario:

@@ -150,3 +150,25 @@ class ArbitraryOperator(HumanModel):
         u = np.where(np.isfinite(u), u, 0.0)
         d = u / self.kp
         return HumanCommand(d, u, intent(self.kp, d))
+
+
+@dataclass(frozen=True)
+class AdversarialOperator(HumanModel):
+    """An operator who drives at the obstacle and ignores what the robot does.
+
+    The wish is a fixed `target` (outside the feasible set: the obstacle), and the handle is held
+    at full deflection toward it: q̂_h = sat(target − q) with sat clipping each coordinate to
+    [−`deflection`, `deflection`]. No damping, no reaction to the machine's pushback or to the
+    robot's speed: only the direction to the target is used. The force is u_h = k_p q̂_h (44),
+    the intent v_h the spring energy (45), so the sharing function sees a large, persistent v_h.
+    """
+
+    trajectory: Trajectory
+    kp: np.ndarray
+    target: np.ndarray
+    deflection: float = 1.0
+
+    def command_from(self, t, desired, q, v):
+        d = np.clip(self.target - q, -self.deflection, self.deflection)
+        return HumanCommand(d, self.kp * d, intent(self.kp, d))
+

@@ -22,7 +22,7 @@ from dataclasses import dataclass, field, fields
 import numpy as np
 
 from .constraints import FeasibleSet, Polytope
-from .human import CircleTrajectory, JoystickSpring, LineTrajectory, ScriptedOperator
+from .human import AdversarialOperator, CircleTrajectory, JoystickSpring, LineTrajectory, ScriptedOperator
 from .models import OmniRobot, PlanarArm
 from .models.omni_robot import OmniRobotParameters
 from .models.planar_arm import PlanarArmParameters
@@ -133,13 +133,15 @@ def build(data: dict, controller: str | None):
     if dk == "line":
         start = _vector(desired, "start", n, "desired.") if "start" in desired else q0.copy()
         trajectory = LineTrajectory(start, _vector(desired, "velocity", n, "desired."))
+    elif dk == "point":
+        trajectory = LineTrajectory(_vector(desired, "at", n, "desired."), np.zeros(n))
     elif dk == "circle":
         trajectory = CircleTrajectory(
             n, _vector(desired, "center", 2, "desired."), _number(desired, "radius", where="desired.", positive=True),
             _number(desired, "omega", where="desired."),
         )
     else:
-        raise ScenarioError(f"desired.kind must be line or circle, got {dk!r}")
+        raise ScenarioError(f"desired.kind must be line, point or circle, got {dk!r}")
 
     human = data.get("human", {})
     kp = np.broadcast_to(_vector({"kp": human.get("kp", 20.0)}, "kp", where="human."), (n,)).copy()
@@ -149,8 +151,12 @@ def build(data: dict, controller: str | None):
         operator = ScriptedOperator(trajectory, kp, kd)
     elif hk == "spring":
         operator = JoystickSpring(trajectory, kp)
+    elif hk == "adversarial":
+        target = trajectory.sample(0.0).q
+        operator = AdversarialOperator(trajectory, kp, target,
+                                       _number(human, "deflection", 1.0, "human.", positive=True))
     else:
-        raise ScenarioError(f"human.kind must be scripted or spring, got {hk!r}")
+        raise ScenarioError(f"human.kind must be scripted, spring or adversarial, got {hk!r}")
 
     sharing = data.get("sharing", {})
     try:
