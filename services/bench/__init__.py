@@ -1,0 +1,1 @@
+"""`sharedctl bench`: control-step, loop, latency, bus-load, CPU and batched-simulator measurements."""

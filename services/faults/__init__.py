@@ -1,0 +1,1 @@
+"""Fault injection: seeded network/CAN impairments, process faults, and the fault campaign."""

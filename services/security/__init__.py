@@ -1,0 +1,1 @@
+"""Zenoh security from configuration: credentials, TLS/mTLS, access control, the router."""
