@@ -19,8 +19,11 @@ demo: $(STAMP)
 	mkdir -p out
 	$(BIN)/sharedctl demo --scenario paper_convex --json out/demo.json
 
+# Pure tests (simulations, codecs) on two workers; tests that start processes or open sockets
+# (marked `processes`) one at a time afterwards, so their timing is not disturbed by the workers.
 test: $(STAMP)
-	$(BIN)/python -m pytest
+	$(BIN)/python -m pytest -n 2 --dist loadfile -m "not processes"
+	$(BIN)/python -m pytest -m processes
 
 paper: $(STAMP)
 	$(BIN)/sharedctl paper --out docs/paper

@@ -16,6 +16,8 @@ from sharedctl.protocol.wire_types import ROBOT_DIMS
 from sharedctl.services.scenario_files import load
 from sharedctl.services.zenoh_session import free_loopback_port, open_session
 
+pytestmark = pytest.mark.processes   # real processes / sockets: never in a parallel worker
+
 POSE = (-0.8, 2.9, 0.0)
 VELOCITY = (0.05, -0.1, 0.0)
 

@@ -32,6 +32,8 @@ from sharedctl.services import can_bus, zenoh_session
 
 from .processes import reap, wait_for
 
+pytestmark = pytest.mark.processes   # real processes / sockets: never in a parallel worker
+
 NODES = (0, 1, 2)
 ROBOT_FRAMES = (cs.Heartbeat, cs.GetEncoderEstimates, cs.GetError, cs.GetIq, cs.GetBusVoltageCurrent, cs.GetTorques)
 

@@ -27,6 +27,8 @@ from sharedctl.services import can_bus, zenoh_session
 from .processes import reap
 from .processes import wait_for as _wait_for
 
+pytestmark = pytest.mark.processes   # real processes / sockets: never in a parallel worker
+
 NODES = (0, 1, 2)
 
 

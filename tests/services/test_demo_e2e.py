@@ -20,7 +20,7 @@ import pytest
 
 from sharedctl.services.demo_measure import TOLERANCE
 
-pytestmark = pytest.mark.slow
+pytestmark = [pytest.mark.slow, pytest.mark.processes]
 RUNS = {"paper_convex": 20.0, "paper_nonconvex": 30.0}
 # The controller's CAN feedback timeout, relaxed from its default 50 ms: the simulated robot is a
 # Python process, and on a shared 2-core host its encoder stream was measured to pause 45–70 ms

@@ -23,6 +23,8 @@ import pytest
 
 from sharedctl.services.zenoh_session import free_loopback_port
 
+pytestmark = pytest.mark.processes   # real processes / sockets: never in a parallel worker
+
 DBC_PATH = Path(__file__).resolve().parents[2] / "protocol" / "odrive_cansimple.dbc"
 GROUP = "239.74.163.2"
 NODES = (0, 1, 2)
