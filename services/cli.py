@@ -18,6 +18,10 @@ COMMANDS = (
     "sharedctl.services.controller.command",
     "sharedctl.services.console.command",
     "sharedctl.services.demo_command",
+    "sharedctl.services.security.router_command",
+    "sharedctl.services.security.credentials_command",
+    "sharedctl.services.faults.zenoh_relay",
+    "sharedctl.services.faults.can_gateway",
 )
 
 

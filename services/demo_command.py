@@ -37,6 +37,7 @@ from sharedctl.protocol import keys
 from sharedctl.scenario import ScenarioError
 
 from .children import Child, free_udp_port, raise_priority, start_child, udp_receive_buffer_errors, wait_listening
+from .faults.stack import FaultStack, add_arguments as add_fault_arguments
 from .demo_measure import TOLERANCE, Recorder, deviation, measure, plant_reference_run, reference_run
 from .lifecycle import StopFlag
 from .scenario_files import load
@@ -61,6 +62,7 @@ def add_parser(subparsers) -> None:
                    help="passed to the controller: CAN feedback age that triggers Estop (default: the controller's, 50)")
     p.add_argument("--no-reference", action="store_true", help="skip the in-process sampled reference run")
     p.add_argument("--log-dir", metavar="DIR", help="keep the children's output here (default: a temporary directory, removed on success)")
+    add_fault_arguments(p)
     p.set_defaults(handler=run)
 
 
@@ -73,6 +75,7 @@ def run(args) -> int:
         loop, _, _ = scenario.closed_loop(args.controller)
         controller_ep = check_loopback(args.zenoh_listen) if args.zenoh_listen else f"tcp/127.0.0.1:{free_loopback_port()}"
         keys.check_robot_id(args.robot_id)
+        faults = FaultStack.from_args(args)   # --fault SPEC: see services/faults/stack.py
     except (ScenarioError, EndpointError, ValueError) as exc:
         print(f"sharedctl demo: {exc}", file=sys.stderr)
         return 2
@@ -82,6 +85,8 @@ def run(args) -> int:
         return 2
     robot_ep = f"tcp/127.0.0.1:{free_loopback_port()}"
     can = ["--can-interface", "udp_multicast", "--can-option", f"port={free_udp_port()}"]
+    can_controller, can_robot = faults.can_arguments(can, free_udp_port)
+    console_ep = faults.console_endpoint(controller_ep, free_loopback_port)
     interactive = not args.headless and sys.stdin.isatty() and sys.stdout.isatty()
     scenario_arg = str(Path(args.scenario).resolve()) if Path(args.scenario).exists() else args.scenario
     backstop = str(duration + STARTUP_TIMEOUT + 30.0)    # children stop by themselves should this demo die
@@ -100,19 +105,20 @@ def run(args) -> int:
     robot_priority = None
     start = time.monotonic()
     try:
-        children["robot"] = start_child("robot", ["robot", "--scenario", scenario_arg, "--zenoh-listen", robot_ep, *can,
+        faults.start(controller_ep, args.robot_id, log_dir, backstop, start_child, wait_listening)
+        children["robot"] = start_child("robot", ["robot", "--scenario", scenario_arg, "--zenoh-listen", robot_ep, *can_robot,
                                                   *common, "--duration", backstop], log_dir)
         robot_priority = raise_priority(children["robot"].popen.pid)
         if not wait_listening(robot_ep, children["robot"], STARTUP_TIMEOUT):
             raise RuntimeError(f"robot did not come up on {robot_ep}")
         # the console before the controller: its start-up (imports, a CPU burst) is over before the
         # controller runs its feedback timeout; it connects when the controller listens (Zenoh retries)
-        console_argv = ["console", "--script", scenario_arg, "--zenoh-connect", controller_ep, *common]
+        console_argv = ["console", "--script", scenario_arg, "--zenoh-connect", console_ep, *common]
         children["console"] = start_child("console", console_argv + ([] if interactive else ["--headless"]), log_dir,
                                           interactive=interactive)
-        children["controller"] = start_child("controller", ["controller", "--scenario", scenario_arg, *law,
-                                                            "--zenoh-listen", controller_ep, *can, *common,
-                                                            "--duration", backstop], log_dir)
+        controller_argv = ["controller", "--scenario", scenario_arg, *law, "--zenoh-listen", controller_ep,
+                           *can_controller, *common, "--duration", backstop]
+        children["controller"] = start_child("controller", controller_argv, log_dir)
         if not wait_listening(controller_ep, children["controller"], STARTUP_TIMEOUT):
             raise RuntimeError(f"controller did not come up on {controller_ep}")
         session = open_session(connect=[robot_ep, controller_ep])
@@ -126,16 +132,20 @@ def run(args) -> int:
                 raise RuntimeError(f"{', '.join(dead)} exited early" if dead else "interrupted" if stop.stopped
                                    else "the operator never got control (no RobotState with a lease holder)")
         t0 = rec.operator_start
+        faults.arm(t0)
         while not stop.stopped and time.monotonic() < t0 + duration:
-            dead = [c.name for c in children.values() if c.popen.poll() is not None]
-            if dead:
-                failure = f"{', '.join(dead)} exited during the run"
+            failure = faults.tick(time.monotonic(), children,
+                                  lambda: start_child("controller.restart", controller_argv, log_dir))
+            dead = [c.name for n, c in children.items() if c.popen.poll() is not None and not faults.expected_dead(n)]
+            if dead or failure:
+                failure = failure or f"{', '.join(dead)} exited during the run"
                 break
             stop.wait(0.05)
     except RuntimeError as exc:
         failure = str(exc)
     finally:
         settle = None
+        faults.continue_all()
         if "console" in children:
             children["console"].stop()
             controller = children.get("controller")
@@ -144,6 +154,7 @@ def run(args) -> int:
         for name in ("controller", "robot"):
             if name in children:
                 children[name].stop()
+        faults.stop()
         time.sleep(0.1)    # the last ground truth samples
         if session is not None:
             session.close()
@@ -166,6 +177,9 @@ def run(args) -> int:
     clean = all(c.clean for c in children.values()) and len(children) == 3
     summary["ok"] = bool(failure is None and clean and result["violations"] == 0 and result["truth_samples"] > 0
                          and result["estops"] == 0)   # an estop means the scenario did not run
+    if not faults.empty:   # intended faults: judged as services/faults/stack.py says
+        summary.update(faults=faults.plan.specs, injected=faults.report(),
+                       ok=faults.judge(summary, children, result, failure))
     _report(summary, args, children, log_dir)
     return 0 if summary["ok"] else 1
 

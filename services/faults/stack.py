@@ -1,0 +1,238 @@
+"""The fault side of `sharedctl demo --fault SPEC`: wiring, process faults, counters, judgement.
+
+`demo_command` calls this module in a few places; with no ``--fault`` nothing here runs and
+the demo is exactly the unimpaired one.
+
+* ``operator.*``/``telemetry.*`` faults: a `sharedctl fault-relay` child listens on its own
+  loopback port F and connects to the controller's endpoint C; the console connects to F
+  instead of C. The demo's own measuring session still connects to C and R directly.
+* ``can.*`` faults: the controller and the robot get two different host-local udp_multicast
+  ports and a `sharedctl fault-gateway` child forwards between them.
+* process faults (``controller|console|robot.kill_at`` / ``stop_at``, ``controller.restart_at``)
+  are carried out by the demo's supervision loop at the given time from the run's start
+  (the first RobotState with the operator in control), by PID, only on the demo's own
+  children. A stopped child is always continued (SIGCONT) before the demo stops it.
+
+Faults act from the run's start on: the relay and gateway forward unimpaired until the demo
+sends them SIGUSR1, so every run starts the same way.
+
+How a run with intended faults is judged (``ok``): the run started (the operator got control),
+the simulator's ground truth shows 0 violations and was recorded, the relay/gateway stayed up,
+and every process that was not deliberately killed exited cleanly (exit 0 on SIGTERM). An
+emergency stop caused by a fault is the safety policy working: it is reported (``estops``),
+not a failure. A killed child's non-zero exit is an intended outcome.
+"""
+from __future__ import annotations
+
+import json
+import os
+import signal
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from .spec import FaultPlan, ProcessFault, parse
+
+READY_TIMEOUT = 15.0
+
+
+def add_arguments(p) -> None:
+    p.add_argument("--fault", action="append", default=[], metavar="SPEC",
+                   help="inject a fault, e.g. operator.delay_ms=300, can.loss=0.05, controller.kill_at=5 (repeatable)")
+    p.add_argument("--fault-seed", type=int, default=None, metavar="N", help="seed of the injected impairments (default 0)")
+
+
+@dataclass
+class Injection:
+    """One process fault as carried out."""
+
+    fault: ProcessFault
+    done_at: float | None = None       # s from the run's start
+    pid: int | None = None
+    continued_at: float | None = None  # stop_at: when SIGCONT was sent
+    skipped: str | None = None
+
+    def report(self) -> dict:
+        return {"fault": self.fault.describe(), "target": self.fault.target, "action": self.fault.action,
+                "planned_at": self.fault.at, "done_at": self.done_at, "pid": self.pid,
+                "continued_at": self.continued_at, "skipped": self.skipped}
+
+
+@dataclass
+class FaultStack:
+    plan: FaultPlan
+    relay_endpoint: str | None = None
+    can_ports: tuple[int, int] | None = None
+    infra: dict = field(default_factory=dict)            # name -> Child (relay, gateway)
+    stats_files: dict = field(default_factory=dict)
+    injections: list[Injection] = field(default_factory=list)
+    killed: dict = field(default_factory=dict)           # name -> the Child that was killed on purpose
+    stopped: dict = field(default_factory=dict)          # name -> (Child, injection)
+    killed_reports: list = field(default_factory=list)
+    armed_at: float | None = None
+    t0: float | None = None
+
+    @classmethod
+    def from_args(cls, args) -> "FaultStack":
+        """Parse ``--fault``/``--fault-seed``; raises FaultSpecError (a ValueError) on a bad spec."""
+        plan = parse(list(args.fault or []), args.fault_seed)
+        return cls(plan, injections=[Injection(f) for f in plan.processes])
+
+    @property
+    def empty(self) -> bool:
+        return self.plan.empty
+
+    @property
+    def needs_relay(self) -> bool:
+        return self.plan.has("operator") or self.plan.has("telemetry")
+
+    # ----- wiring ------------------------------------------------------------
+    def console_endpoint(self, controller_ep: str, free_port) -> str:
+        if not self.needs_relay:
+            return controller_ep
+        self.relay_endpoint = f"tcp/127.0.0.1:{free_port()}"
+        return self.relay_endpoint
+
+    def can_arguments(self, can: list[str], free_udp_port) -> tuple[list[str], list[str]]:
+        """(controller's CAN arguments, robot's): the same bus unless CAN faults need a gateway."""
+        if not self.plan.has("can"):
+            return can, can
+        self.can_ports = (free_udp_port(), free_udp_port())
+        return ([*can[:2], "--can-option", f"port={self.can_ports[0]}"],
+                [*can[:2], "--can-option", f"port={self.can_ports[1]}"])
+
+    def fault_argv(self) -> list[str]:
+        argv = [a for spec in self.plan.specs for a in ("--fault", spec)]
+        return argv + ["--fault-seed", str(self.plan.seed), "--arm-on-signal"]
+
+    def start(self, controller_ep: str, robot_id: str, log_dir: Path, backstop: str, start_child, wait_listening) -> None:
+        """Start the relay and/or the gateway (before the robot, console and controller)."""
+        if self.can_ports is not None:
+            stats, ready = log_dir / "fault-gateway.json", log_dir / "fault-gateway.ready"
+            self.stats_files["gateway"] = stats
+            self.infra["gateway"] = start_child("fault-gateway", [
+                "fault-gateway", "--controller-port", str(self.can_ports[0]), "--robot-port", str(self.can_ports[1]),
+                *self.fault_argv(), "--stats", str(stats), "--ready", str(ready), "--duration", backstop], log_dir)
+            deadline = time.monotonic() + READY_TIMEOUT
+            while not ready.exists():
+                if self.infra["gateway"].popen.poll() is not None or time.monotonic() > deadline:
+                    raise RuntimeError("the CAN fault gateway did not come up")
+                time.sleep(0.05)
+        if self.relay_endpoint is not None:
+            stats = log_dir / "fault-relay.json"
+            self.stats_files["relay"] = stats
+            self.infra["relay"] = start_child("fault-relay", [
+                "fault-relay", "--listen", self.relay_endpoint, "--connect", controller_ep, "--robot-id", robot_id,
+                *self.fault_argv(), "--stats", str(stats), "--duration", backstop], log_dir)
+            if not wait_listening(self.relay_endpoint, self.infra["relay"], READY_TIMEOUT):
+                raise RuntimeError(f"the Zenoh fault relay did not come up on {self.relay_endpoint}")
+
+    # ----- during the run ------------------------------------------------------
+    def arm(self, t0: float) -> None:
+        """The run has started (monotonic `t0`): faults act from now on."""
+        if self.t0 is not None:
+            return
+        self.t0 = t0
+        for child in self.infra.values():
+            if child.popen.poll() is None:
+                child.popen.send_signal(signal.SIGUSR1)
+        self.armed_at = time.monotonic() - t0
+
+    def expected_dead(self, name: str) -> bool:
+        return name in self.killed
+
+    def tick(self, now: float, children: dict, restart) -> str | None:
+        """Carry out the process faults that are due; returns a failure reason if the relay/gateway died."""
+        if self.t0 is None:
+            return None
+        t = now - self.t0
+        for inj in self.injections:
+            if inj.done_at is None and inj.skipped is None and t >= inj.fault.at:
+                self._inject(inj, t, children, restart)
+            if inj.fault.action == "stop" and inj.done_at is not None and inj.continued_at is None \
+                    and t >= inj.fault.at + inj.fault.duration:
+                self._continue(inj, t)
+        dead = [name for name, child in self.infra.items() if child.popen.poll() is not None]
+        return f"the fault {', '.join(dead)} exited during the run" if dead else None
+
+    def _inject(self, inj: Injection, t: float, children: dict, restart) -> None:
+        name, action = inj.fault.target, inj.fault.action
+        if action == "restart":
+            if name not in self.killed:
+                inj.skipped = "not killed"
+                return
+            children[name] = restart()
+            inj.pid, inj.done_at = children[name].popen.pid, t
+            del self.killed[name]
+            return
+        child = children.get(name)
+        if child is None or child.popen.poll() is not None:
+            inj.skipped = "not running"
+            return
+        inj.pid, inj.done_at = child.popen.pid, t
+        if action == "kill":
+            child.popen.kill()       # SIGKILL to our own child, by PID
+            child.popen.wait()
+            self.killed[name] = child
+            self._record_killed(name, child)
+        else:
+            os.kill(child.popen.pid, signal.SIGSTOP)
+            self.stopped[name] = (child, inj)
+
+    def _record_killed(self, name: str, child) -> None:
+        child.exit_code = child.popen.returncode
+        child.stop_seconds = 0.0
+        self.killed_reports.append({"name": name, **child.report(), "signal": "SIGKILL (injected)"})
+
+    def _continue(self, inj: Injection, t: float | None) -> None:
+        child, _ = self.stopped.pop(inj.fault.target, (None, None))
+        if child is not None and child.popen.poll() is None:
+            os.kill(child.popen.pid, signal.SIGCONT)
+        inj.continued_at = t
+
+    def continue_all(self) -> None:
+        """SIGCONT every child still stopped (before the demo stops them)."""
+        now = None if self.t0 is None else time.monotonic() - self.t0
+        for inj in [i for i in self.injections if i.fault.action == "stop" and i.done_at is not None
+                    and i.continued_at is None]:
+            self._continue(inj, now)
+
+    # ----- after the run ---------------------------------------------------------
+    def stop(self) -> None:
+        self.continue_all()
+        for child in self.infra.values():
+            child.stop(5.0)
+
+    def report(self) -> dict:
+        out: dict = {"seed": self.plan.seed, "armed_at": self.armed_at,
+                     "processes": [inj.report() for inj in self.injections],
+                     "killed": self.killed_reports}
+        for name, path in self.stats_files.items():
+            try:
+                stats = json.loads(Path(path).read_text())
+            except (OSError, ValueError):
+                stats = {"error": f"no counters from the fault {name}"}
+            out[name] = _with_rates(stats)
+            child = self.infra.get(name)
+            if child is not None:
+                out[name]["exit_code"] = child.exit_code
+        return out
+
+    def judge(self, summary: dict, children: dict, result: dict, failure: str | None) -> bool:
+        """``ok`` under intended faults (see the module docstring)."""
+        unintended = [c for name, c in children.items() if name not in self.killed and not c.clean]
+        infra_clean = all(c.clean for c in self.infra.values())
+        return bool(failure is None and not unintended and infra_clean and result["violations"] == 0
+                    and result["truth_samples"] > 0)
+
+
+def _with_rates(stats: dict) -> dict:
+    """Add the measured rates next to the raw counters of each stream."""
+    for value in stats.values():
+        if isinstance(value, dict) and value.get("received"):
+            n = value["received"]
+            dropped = sum(value.get(k, 0) for k in ("lost", "burst_lost", "blackout_dropped", "rate_dropped"))
+            value["measured_drop_rate"] = dropped / n
+            value["measured_duplicate_rate"] = value.get("duplicated", 0) / n
+            value["measured_corrupt_rate"] = value.get("corrupted", 0) / n
+    return stats
