@@ -26,7 +26,7 @@ from sharedctl.protocol.msgpack_codec import decode_message, encode_message
 from sharedctl.protocol.wire_types import ROBOT_DIMS
 
 from ..lifecycle import RateClock, StopFlag
-from ..zenoh_session import open_session
+from ..security.zenoh_config import open_configured
 from .dashboard import DashboardView, map_size, render
 from .keyboard import VirtualJoystick, parse_keys
 from .map_view import MapFrame, background
@@ -50,6 +50,7 @@ class ConsoleOptions:
     operator_id: str = "operator"
     rate: float = 50.0               # Hz
     deadman_mode: str = "toggle"
+    zenoh_config: str | None = None  # Zenoh JSON5 file (credentials, TLS, mode); endpoints above replace its own
 
 
 class Telemetry:
@@ -166,7 +167,7 @@ class ConsoleApp:
         out = out if out is not None else sys.stdout
         opts = self.options
         start = time.monotonic()
-        session = open_session(opts.listen, opts.connect)
+        session = open_configured(opts.zenoh_config, opts.listen, opts.connect)
         live = None
         try:
             subscribers = [

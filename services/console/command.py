@@ -9,6 +9,7 @@ from sharedctl.scenario import ScenarioError
 
 from ..lifecycle import StopFlag
 from ..scenario_files import load
+from ..security import zenoh_config
 from ..zenoh_session import DEFAULT_ENDPOINT, EndpointError
 
 
@@ -22,6 +23,7 @@ def add_parser(subparsers) -> None:
     link = p.add_mutually_exclusive_group()
     link.add_argument("--zenoh-connect", metavar="EP", help=f"connect to a loopback endpoint (default {DEFAULT_ENDPOINT})")
     link.add_argument("--zenoh-listen", metavar="EP", help="listen on a loopback endpoint instead")
+    zenoh_config.add_argument(p)
     p.add_argument("--robot-id", default="robot1", help="robot id in the key expressions (default robot1)")
     p.add_argument("--operator-id", default="operator", help="operator id sent with every command")
     p.add_argument("--rate", type=float, default=50.0, metavar="HZ", help="command rate (default 50)")
@@ -46,11 +48,13 @@ def run(args) -> int:
     options = ConsoleOptions(
         scenario=scenario, script=args.script is not None, headless=not interactive, duration=args.duration,
         listen=[args.zenoh_listen] if args.zenoh_listen else None,
-        connect=None if args.zenoh_listen else [args.zenoh_connect or DEFAULT_ENDPOINT],
+        connect=None if args.zenoh_listen or (args.zenoh_config and not args.zenoh_connect)
+        else [args.zenoh_connect or DEFAULT_ENDPOINT], zenoh_config=args.zenoh_config,
         robot_id=args.robot_id, operator_id=args.operator_id, rate=args.rate, deadman_mode=args.deadman,
     )
     try:
+        zenoh_config.check_session_args(options.zenoh_config, options.listen, options.connect)
         return ConsoleApp(options).run(stop, interactive)
-    except (EndpointError, KeyExprError) as exc:
+    except (EndpointError, KeyExprError, zenoh_config.ZenohConfigError) as exc:
         print(f"sharedctl console: {exc}", file=sys.stderr)
         return 2

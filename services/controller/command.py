@@ -15,6 +15,7 @@ from sharedctl.protocol.errors import KeyExprError
 from sharedctl.scenario import ScenarioError
 
 from .. import can_bus, zenoh_session
+from ..security import zenoh_config
 from ..lifecycle import StopFlag
 from ..scenario_files import load
 from .daemon import ControllerDaemon, DaemonConfig
@@ -34,6 +35,7 @@ def add_parser(subparsers) -> None:
     p.add_argument("--zenoh-connect", metavar="EP", action="append",
                    help="connect to a peer listening on this loopback endpoint (repeatable; peers do not forward "
                         "for each other: connect to every peer whose data you need, or let them connect to you)")
+    zenoh_config.add_argument(p)
     p.add_argument("--robot-id", default="robot1", help="robot id in the key expressions (default robot1)")
     p.add_argument("--rate", type=float, default=500.0, help="control loop rate, Hz (default 500)")
     p.add_argument("--telemetry-rate", type=float, default=50.0, help="RobotState rate, Hz (default 50)")
@@ -57,8 +59,8 @@ def run(args) -> int:
         loop, q0, _ = scenario.closed_loop(args.controller)
         spec = can_bus.spec_from_args(args)
         connect = list(args.zenoh_connect or [])
-        listen = list(args.zenoh_listen or ([] if connect else [zenoh_session.DEFAULT_ENDPOINT]))
-        zenoh_session.config(listen, connect)   # validates the endpoints before anything opens
+        listen = list(args.zenoh_listen or ([] if connect or args.zenoh_config else [zenoh_session.DEFAULT_ENDPOINT]))
+        zenoh_config.check_session_args(args.zenoh_config, listen, connect)   # validates before anything opens
     except (ScenarioError, KeyExprError, ValueError) as exc:
         print(f"{PROG}: {exc}", file=sys.stderr)
         return 2
@@ -71,7 +73,7 @@ def run(args) -> int:
     priority = raise_nice(args.priority)   # before Zenoh and CAN start their threads (they inherit it)
     try:
         bus = can_bus.open_bus(spec)
-        session = zenoh_session.open_session(listen, connect)
+        session = zenoh_config.open_configured(args.zenoh_config, listen, connect)
         daemon = ControllerDaemon(config, loop, q0, bus, session)
         daemon.realtime = config.realtime and make_loop_realtime()   # this thread runs the loop
         zenoh_desc = " ".join([f"listen {e}" for e in listen] + [f"connect {e}" for e in connect])

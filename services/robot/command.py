@@ -18,6 +18,7 @@ from sharedctl.protocol.keys import check_robot_id
 from sharedctl.scenario import ScenarioError
 
 from .. import can_bus, zenoh_session
+from ..security import zenoh_config
 from ..lifecycle import StopFlag
 from ..scenario_files import load
 from .plant import RobotSimConfig, RobotSimConfigError
@@ -36,6 +37,7 @@ def add_parser(subparsers) -> None:
     z.add_argument("--zenoh-listen", metavar="EP",
                    help=f"loopback endpoint to listen on (default: {zenoh_session.DEFAULT_ENDPOINT})")
     z.add_argument("--zenoh-connect", metavar="EP", help="loopback endpoint of a peer to connect to")
+    zenoh_config.add_argument(p)
     p.add_argument("--robot-id", default="robot1", help="robot id in the Zenoh keys (default: robot1)")
     p.add_argument("--duration", type=float, metavar="S", help="stop after S seconds (default: run until SIGINT/SIGTERM)")
     p.set_defaults(handler=run)
@@ -64,9 +66,9 @@ def run(args) -> int:
         spec = can_bus.spec_from_args(args)
         listen = [args.zenoh_listen] if args.zenoh_listen else []
         connect = [args.zenoh_connect] if args.zenoh_connect else []
-        if not listen and not connect:
+        if not listen and not connect and not args.zenoh_config:
             listen = [zenoh_session.DEFAULT_ENDPOINT]
-        zenoh_session.config(listen, connect)  # validates the endpoints (loopback only)
+        zenoh_config.check_session_args(args.zenoh_config, listen, connect)  # loopback only
     except (ScenarioError, RobotSimConfigError, KeyExprError, ValueError) as exc:
         return _fail(str(exc))
     if args.duration is not None and not args.duration > 0:
@@ -77,7 +79,7 @@ def run(args) -> int:
     except Exception as exc:  # python-can raises several types (CanError, OSError, ValueError)
         return _fail(f"cannot open CAN bus {spec.describe()}: {exc}", 1)
     try:
-        session = zenoh_session.open_session(listen, connect)
+        session = zenoh_config.open_configured(args.zenoh_config, listen, connect)
     except Exception as exc:  # zenoh.ZError, e.g. the port is taken
         bus.shutdown()
         return _fail(f"cannot open Zenoh session ({' '.join(listen + connect)}): {exc}", 1)
@@ -87,7 +89,7 @@ def run(args) -> int:
     try:
         process = RobotProcess(sim, bus, session, robot_id)
         c = sim.config
-        endpoint = f"listen {listen[0]}" if listen else f"connect {connect[0]}"
+        endpoint = f"listen {listen[0]}" if listen else f"connect {connect[0]}" if connect else args.zenoh_config
         print(f"{PROG}: {robot_id} on CAN {spec.describe()}, Zenoh {endpoint}; physics {c.physics_rate_hz:g} Hz, "
               f"encoder {c.encoder_rate_hz:g} Hz, heartbeat {c.heartbeat_rate_hz:g} Hz, truth {c.truth_rate_hz:g} Hz, "
               f"watchdog {c.watchdog_timeout:g} s", flush=True)

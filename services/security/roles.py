@@ -1,0 +1,120 @@
+"""Who may do what on the Zenoh keys of sharedctl: the roles and the router's access-control list.
+
+Pure data (no zenoh import): `access_control()` returns the `access_control` section of a
+router configuration. Every role authenticates (a usrpwd user named after the role, or, under
+mutual TLS, a client certificate whose common name is the role) and the router's default is
+**deny**. What a role may *write* (what the router accepts from it, flow `ingress`):
+
+    operator    put  …/operator/cmd and …/alive/operator; query …/control/lease (take/release);
+                its liveliness token …/alive/operator
+    controller  put  …/state, …/events, …/alive/controller; declare the …/control/lease
+                queryable and reply on it; its liveliness token …/alive/controller
+    robot       put  …/truth and …/alive/robot; its liveliness token …/alive/robot
+    observer    nothing: subscribes only
+
+What every authenticated role may *read*: declare subscribers (and liveliness subscribers and
+queries) on `sharedctl/**`, and receive publications, liveliness tokens and declarations there
+(flow `egress` for deliveries). Deliveries of a query go only to the controller (the lease's
+queryable) and replies only to the operator. Keys are matched with `*` in the robot-id chunk, so
+one router serves several robots with the same rules. A message nobody allowed is dropped by the
+router without an error at the sender (Zenoh's ACL gives no feedback; the router logs it at
+debug level).
+"""
+from __future__ import annotations
+
+import re
+
+ROLES = ("operator", "controller", "robot", "observer")
+PREFIX = "sharedctl/v1/*"
+ALL_KEYS = "sharedctl/**"
+
+_ROLE_NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_-]{0,63}$")
+
+
+class RoleError(ValueError):
+    """An unknown role or a role name that is not a token."""
+
+
+def check_role_name(role: object) -> str:
+    if not isinstance(role, str) or not _ROLE_NAME.match(role):
+        raise RoleError(f"role {role!r}: 1..64 letters, digits, '_' or '-'")
+    return role
+
+
+# role -> {message kind: key expressions it may send (flow ingress at the router)}
+WRITES: dict[str, dict[str, tuple[str, ...]]] = {
+    "operator": {
+        "put": (f"{PREFIX}/operator/cmd", f"{PREFIX}/alive/operator"),
+        "query": (f"{PREFIX}/control/lease",),
+        "liveliness_token": (f"{PREFIX}/alive/operator",),
+    },
+    "controller": {
+        "put": (f"{PREFIX}/state", f"{PREFIX}/events", f"{PREFIX}/alive/controller"),
+        "declare_queryable": (f"{PREFIX}/control/lease",),
+        "reply": (f"{PREFIX}/control/lease",),
+        "liveliness_token": (f"{PREFIX}/alive/controller",),
+    },
+    "robot": {
+        "put": (f"{PREFIX}/truth", f"{PREFIX}/alive/robot"),
+        "liveliness_token": (f"{PREFIX}/alive/robot",),
+    },
+    "observer": {},
+}
+
+# role -> {message kind: key expressions delivered to it (flow egress) beyond the common reads}
+DELIVERIES: dict[str, dict[str, tuple[str, ...]]] = {
+    "operator": {"reply": (f"{PREFIX}/control/lease",)},
+    "controller": {"query": (f"{PREFIX}/control/lease",)},
+    "robot": {},
+    "observer": {},
+}
+
+READ_INGRESS = ("declare_subscriber", "declare_liveliness_subscriber", "liveliness_query")
+READ_EGRESS = ("put", "liveliness_token", "declare_subscriber", "declare_queryable")
+
+
+def _rule(rule_id: str, flow: str, messages, key_exprs) -> dict:
+    return {"id": rule_id, "permission": "allow", "flows": [flow], "messages": list(messages),
+            "key_exprs": list(key_exprs)}
+
+
+def rules_for(role: str) -> list[dict]:
+    """The allow rules of one role (ids `ROLE-write-KIND`, `ROLE-deliver-KIND`)."""
+    if role not in WRITES:
+        raise RoleError(f"unknown role {role!r} (one of {', '.join(ROLES)})")
+    rules = [_rule(f"{role}-write-{kind}", "ingress", [kind], keys) for kind, keys in WRITES[role].items()]
+    rules += [_rule(f"{role}-deliver-{kind}", "egress", [kind], keys) for kind, keys in DELIVERIES[role].items()]
+    return rules
+
+
+def subject(role: str, tls: bool, usrpwd: bool) -> dict:
+    """How the router recognises a role: its username and/or (mTLS) its certificate's common name."""
+    entry: dict = {"id": f"{role}-subject"}
+    if usrpwd:
+        entry["usernames"] = [role]
+    if tls:
+        entry["cert_common_names"] = [role]
+    if len(entry) == 1:
+        raise RoleError("a subject needs usernames (usrpwd) or certificate common names (mTLS)")
+    return entry
+
+
+def access_control(roles=ROLES, tls: bool = False, usrpwd: bool = True) -> dict:
+    """The router's `access_control` section: default deny, the rules above for each role.
+
+    With both `tls` and `usrpwd`, a subject matches only a connection that presents both the
+    role's certificate and the role's password (Zenoh takes the product of the lists)."""
+    roles = [check_role_name(r) for r in roles]
+    read = [_rule("read-declare", "ingress", READ_INGRESS, [ALL_KEYS]),
+            _rule("read-deliver", "egress", READ_EGRESS, [ALL_KEYS])]
+    rules = list(read)
+    policies = []
+    subjects = []
+    for role in roles:
+        own = rules_for(role)
+        rules += own
+        subjects.append(subject(role, tls, usrpwd))
+        policies.append({"id": f"{role}-policy", "rules": [r["id"] for r in read + own],
+                         "subjects": [f"{role}-subject"]})
+    return {"enabled": True, "default_permission": "deny", "rules": rules, "subjects": subjects,
+            "policies": policies}
