@@ -14,7 +14,7 @@ Array lengths: every ``dof`` array of one message has the same length n
 from __future__ import annotations
 
 import enum
-from dataclasses import dataclass, field, fields
+from dataclasses import MISSING, dataclass, field, fields
 from typing import Any, ClassVar
 
 from .errors import MissingField, OutOfRange, WrongLength, WrongType
@@ -37,7 +37,7 @@ from .wire_types import (
     vector,
 )
 
-WIRE_VERSION: tuple[int, int] = (1, 0)
+WIRE_VERSION: tuple[int, int] = (1, 1)
 """(major, minor) written by this implementation; see protocol/README.md, "Versioning"."""
 
 
@@ -97,9 +97,12 @@ class Severity(enum.StrEnum):
     CRITICAL = "critical"
 
 
-def wire(check: Check, dim: str | None = None) -> Any:
-    """Declare a wire field: its validator and, for arrays, the dimension it follows."""
-    return field(metadata={"check": check, "dim": dim})
+def wire(check: Check, dim: str | None = None, default: Any = MISSING) -> Any:
+    """Declare a wire field: its validator and, for arrays, the dimension it follows.
+
+    A field added by a minor version has a ``default``: a payload of an older minor that
+    lacks it decodes with that value (protocol/README.md §2.2)."""
+    return field(default=default, metadata={"check": check, "dim": dim})
 
 
 def _validate(obj: Any) -> None:
@@ -134,6 +137,7 @@ def wire_message(kind: str | None, max_bytes: int = 0):
         cls.__post_init__ = __post_init__
         cls = dataclass(frozen=True, slots=True)(cls)
         cls.WIRE_FIELDS = tuple((f.name, f.metadata["check"], f.metadata["dim"]) for f in fields(cls))
+        cls.WIRE_DEFAULTS = {f.name: f.default for f in fields(cls) if f.default is not MISSING}
         cls.KIND = kind
         cls.MAX_BYTES = max_bytes
         return cls
@@ -149,10 +153,11 @@ def nested(record_cls: type) -> Check:
             return value
         if not isinstance(value, dict):
             raise WrongType(f"{what} must be a map")
-        missing = [name for name, _, _ in record_cls.WIRE_FIELDS if name not in value]
+        defaults = record_cls.WIRE_DEFAULTS
+        missing = [name for name, _, _ in record_cls.WIRE_FIELDS if name not in value and name not in defaults]
         if missing:
             raise MissingField(f"{what}.{missing[0]} is missing")
-        return record_cls(**{name: value[name] for name, _, _ in record_cls.WIRE_FIELDS})
+        return record_cls(**{name: value.get(name, defaults.get(name)) for name, _, _ in record_cls.WIRE_FIELDS})
 
     return check
 
@@ -188,6 +193,7 @@ class LinkHealth:
     loss_fraction: float = wire(real(0.0, 1.0))
     staleness_ms: float = wire(real(0.0))
     can_feedback_age_ms: float = wire(real(0.0))
+    rejected_messages: int = wire(uint64, default=0)   # since 1.1: operator messages the controller refused
 
 
 @wire_message("robot_state", max_bytes=4096)

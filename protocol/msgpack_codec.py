@@ -155,9 +155,10 @@ def decode_message(payload: bytes, dims: Dims | None = ROBOT_DIMS, *, expect: ty
         raise UnexpectedKind(f"expected {expect.KIND}, got {kind}")
     values = {}
     for name, _, _ in cls.WIRE_FIELDS:
-        if name not in body:
+        if name in body:
+            values[name] = body[name]
+        elif name not in cls.WIRE_DEFAULTS:     # a field added by a later minor may be absent
             raise MissingField(f"{kind}.{name} is missing")
-        values[name] = body[name]
     message = cls(**values)  # validates every field; unknown keys were ignored
     if dims is not None:
         check_dims(message, dims)

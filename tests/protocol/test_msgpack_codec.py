@@ -63,9 +63,9 @@ def test_messages_of_any_valid_dimensions_round_trip_with_those_dims(cls):
     check()
 
 
-def test_payload_is_a_map_tagged_with_type_and_version_1_0():
+def test_payload_is_a_map_tagged_with_type_and_version_1_1():
     body = msgpack.unpackb(encode_message(heartbeat()))
-    assert (body["type"], body["version"]) == ("heartbeat", [1, 0])
+    assert (body["type"], body["version"]) == ("heartbeat", [1, 1])
 
 
 def test_enums_travel_as_their_string_values():
@@ -356,7 +356,7 @@ def _largest(cls):
                      active_group=15, u_h=v, u_f=v, u_s=v, wheel_torques=v, theta_hat=(-1e308,) * 16,
                      region_margins=(-1e308,) * 32, lease_holder=token, authority="machine",
                      min_margin=-1e308, k_s=0.1234567, k_h=0.1234567, k_f=0.1234567,
-                     link=m.LinkHealth(1e308, 0.123456789, 1e308, 1e308))
+                     link=m.LinkHealth(1e308, 0.123456789, 1e308, 1e308, 2**64 - 1))
     if cls is m.Event:
         return cls(seq=2**64 - 1, time=1e308, kind="authority_change", severity="critical", source=token, text=text)
     if cls is m.Heartbeat:
