@@ -18,10 +18,15 @@ COMMANDS = (
     "sharedctl.services.controller.command",
     "sharedctl.services.console.command",
     "sharedctl.services.demo_command",
+    "sharedctl.services.faults.command",
     "sharedctl.services.security.router_command",
     "sharedctl.services.security.credentials_command",
     "sharedctl.services.faults.zenoh_relay",
     "sharedctl.services.faults.can_gateway",
+    "sharedctl.services.recording.record_command",
+    "sharedctl.services.recording.recover_command",
+    "sharedctl.services.recording.replay_command",
+    "sharedctl.services.recording.plot_command",
 )
 
 
