@@ -136,19 +136,21 @@ def flip_bits(payload: bytes, bits: int, rng: random.Random) -> bytes:
 
 
 class Corrupt(Stage):
+    """Bit flips; the first ``skip`` bytes (a header the caller packed in front) are never touched."""
+
     name = "corrupt"
 
-    def __init__(self, p: float, bits: int = 1) -> None:
-        self.p, self.bits = p, bits
+    def __init__(self, p: float, bits: int = 1, skip: int = 0) -> None:
+        self.p, self.bits, self.skip = p, bits, skip
 
     def process(self, t, items, rng, counters):
         out = []
         for release, payload in items:
-            if payload and rng.random() < self.p:
-                flipped = flip_bits(payload, self.bits, rng)
+            body = payload[self.skip:]
+            if body and rng.random() < self.p:
                 _count(counters, "corrupted")
-                _count(counters, "bits_flipped", min(self.bits, len(payload) * 8))
-                payload = flipped
+                _count(counters, "bits_flipped", min(self.bits, len(body) * 8))
+                payload = payload[:self.skip] + flip_bits(body, self.bits, rng)
             out.append((release, payload))
         return out
 

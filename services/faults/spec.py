@@ -251,7 +251,7 @@ def _check_restarts(plan: FaultPlan) -> None:
 
 
 # ----- from a plan to a pipeline ------------------------------------------------
-def stages(link: LinkFaults) -> list[Stage]:
+def stages(link: LinkFaults, corrupt_skip: int = 0) -> list[Stage]:
     """The impairment stages of one stream, in the order of services/faults/impairments.py."""
     out: list[Stage] = []
     if link.blackouts:
@@ -263,7 +263,7 @@ def stages(link: LinkFaults) -> list[Stage]:
     if link.duplicate > 0:
         out.append(Duplicate(link.duplicate))
     if link.corrupt is not None:
-        out.append(Corrupt(*link.corrupt))
+        out.append(Corrupt(*link.corrupt, skip=corrupt_skip))
     if link.replay is not None:
         out.append(Replay(link.replay[0], link.replay[1] / 1000.0))
     if link.delay_ms > 0 or link.jitter_ms > 0:
@@ -275,7 +275,7 @@ def stages(link: LinkFaults) -> list[Stage]:
     return out
 
 
-def pipeline(plan: FaultPlan, stream: str) -> Pipeline:
+def pipeline(plan: FaultPlan, stream: str, corrupt_skip: int = 0) -> Pipeline:
     """The seeded pipeline of ``stream`` (``operator``, ``telemetry``, ``can.command``…): seed ``"<seed>:<stream>"``."""
     link = plan.links[stream.split(".")[0]]
-    return Pipeline(stages(link), seed=f"{plan.seed}:{stream}")
+    return Pipeline(stages(link, corrupt_skip), seed=f"{plan.seed}:{stream}")
