@@ -1,0 +1,213 @@
+"""Authentication, access control and mutual TLS with real Zenoh sessions on loopback.
+
+A router session (the configuration `sharedctl router` runs, built by
+services/security/zenoh_config.py) with usrpwd, default-deny ACL and, in the mTLS tests, a
+`tls/` endpoint; the clients are the per-role configurations."""
+from __future__ import annotations
+
+import json
+import signal
+import subprocess
+import sys
+import threading
+import time
+
+import pytest
+import zenoh
+
+from sharedctl.protocol import keys
+from sharedctl.services.security import credentials
+from sharedctl.services.security.zenoh_config import client_config, router_config, write_config
+from sharedctl.services.zenoh_session import free_loopback_port
+
+from .processes import reap, wait_for
+
+pytestmark = pytest.mark.processes
+
+REFUSE_TIMEOUT_MS = 1500     # how long a refused client keeps trying before zenoh.open raises
+ROBOT = "robot1"
+
+
+def _open(cfg: dict) -> zenoh.Session:
+    return zenoh.open(zenoh.Config.from_json5(json.dumps(cfg)))
+
+
+def _client(role, creds, endpoint, **changes) -> dict:
+    cfg = client_config(role, creds, [endpoint])
+    cfg["connect"]["timeout_ms"] = REFUSE_TIMEOUT_MS
+    for path, value in changes.items():       # "transport/auth/usrpwd/password" -> value (None deletes)
+        *parents, leaf = path.split("/")
+        node = cfg
+        for p in parents:
+            node = node.setdefault(p, {})
+        if value is None:
+            node.pop(leaf, None)
+        else:
+            node[leaf] = value
+    return cfg
+
+
+def _refused(cfg: dict) -> bool:
+    try:
+        session = _open(cfg)
+    except zenoh.ZError:
+        return True
+    session.close()
+    return False
+
+
+@pytest.fixture(scope="module")
+def creds(tmp_path_factory):
+    return credentials.generate(tmp_path_factory.mktemp("creds"))
+
+
+@pytest.fixture(scope="module")
+def tcp_router(creds):
+    endpoint = f"tcp/127.0.0.1:{free_loopback_port()}"
+    router = _open(router_config(creds, [endpoint]))
+    yield endpoint
+    router.close()
+
+
+@pytest.fixture(scope="module")
+def tls_router(creds):
+    endpoint = f"tls/127.0.0.1:{free_loopback_port()}"
+    router = _open(router_config(creds, [endpoint]))
+    yield endpoint
+    router.close()
+
+
+# ----- user/password --------------------------------------------------------------
+def test_client_with_its_password_connects(creds, tcp_router):
+    session = _open(_client("observer", creds, tcp_router))
+    try:
+        assert len(session.info.routers_zid()) == 1
+    finally:
+        session.close()
+
+
+def test_client_without_credentials_is_refused(creds, tcp_router):
+    assert _refused(_client("operator", creds, tcp_router, **{"transport/auth": None}))
+
+
+def test_client_with_a_wrong_password_is_refused(creds, tcp_router):
+    assert _refused(_client("operator", creds, tcp_router, **{"transport/auth/usrpwd/password": "not-the-password"}))
+
+
+def test_a_role_name_with_another_roles_password_is_refused(creds, tcp_router):
+    assert _refused(_client("operator", creds, tcp_router,
+                            **{"transport/auth/usrpwd/password": creds.users["observer"]}))
+
+
+# ----- access control ----------------------------------------------------------
+class Inbox:
+    def __init__(self) -> None:
+        self.lock = threading.Lock()
+        self.payloads: list[bytes] = []
+
+    def __call__(self, sample) -> None:
+        with self.lock:
+            self.payloads.append(sample.payload.to_bytes())
+
+    def count(self, payload: bytes) -> int:
+        with self.lock:
+            return self.payloads.count(payload)
+
+
+def _publish_both(creds, endpoint, key, writer_role, intruder_role, listener_role, n=20):
+    """`writer` and `intruder` each put n samples on `key`; what does `listener` receive?"""
+    sessions = [_open(_client(r, creds, endpoint)) for r in (listener_role, writer_role, intruder_role)]
+    listener, writer, intruder = sessions
+    inbox = Inbox()
+    try:
+        sub = listener.declare_subscriber(key, inbox)
+        probe = writer.declare_publisher(key)
+        # the subscription has reached the router once the writer's publisher matches it
+        wait_for(lambda: probe.matching_status.matching, 5.0, "the subscription to reach the router")
+        for _ in range(n):
+            intruder.put(key, b"intruder")
+            writer.put(key, b"writer")
+            time.sleep(0.005)
+        wait_for(lambda: inbox.count(b"writer") == n, 5.0, "the writer's samples")
+        time.sleep(0.2)     # anything else in flight
+        probe.undeclare()
+        sub.undeclare()
+        return inbox.count(b"writer"), inbox.count(b"intruder")
+    finally:
+        for s in sessions:
+            s.close()
+
+
+def test_observer_cannot_publish_operator_commands(creds, tcp_router):
+    got_operator, got_observer = _publish_both(creds, tcp_router, keys.operator_cmd_key(ROBOT),
+                                               writer_role="operator", intruder_role="observer",
+                                               listener_role="controller")
+    assert got_operator == 20
+    assert got_observer == 0
+
+
+def test_operator_cannot_publish_robot_state(creds, tcp_router):
+    got_controller, got_operator = _publish_both(creds, tcp_router, keys.state_key(ROBOT),
+                                                 writer_role="controller", intruder_role="operator",
+                                                 listener_role="observer")
+    assert got_controller == 20
+    assert got_operator == 0
+
+
+def test_controller_cannot_forge_ground_truth(creds, tcp_router):
+    got_robot, got_controller = _publish_both(creds, tcp_router, keys.truth_key(ROBOT),
+                                              writer_role="robot", intruder_role="controller",
+                                              listener_role="observer")
+    assert got_robot == 20
+    assert got_controller == 0
+
+
+# ----- mutual TLS ---------------------------------------------------------------
+def test_mtls_client_with_its_certificate_connects(creds, tls_router):
+    session = _open(_client("operator", creds, tls_router))
+    try:
+        assert len(session.info.routers_zid()) == 1
+    finally:
+        session.close()
+
+
+def test_mtls_refuses_a_client_without_a_certificate(creds, tls_router):
+    cfg = _client("operator", creds, tls_router, **{"transport/link/tls/connect_certificate": None,
+                                                     "transport/link/tls/connect_private_key": None,
+                                                     "transport/link/tls/enable_mtls": None})
+    assert "usrpwd" in cfg["transport"]["auth"]       # the password alone is not enough
+    assert _refused(cfg)
+
+
+def test_mtls_refuses_a_certificate_from_another_ca(creds, tls_router, tmp_path):
+    other = credentials.generate(tmp_path / "other", roles=("operator",))
+    cfg = _client("operator", creds, tls_router, **{
+        "transport/link/tls/connect_certificate": str(other.certificate("operator")),
+        "transport/link/tls/connect_private_key": str(other.private_key("operator"))})
+    assert _refused(cfg)
+
+
+def test_acl_under_mtls_matches_the_certificate_common_name(creds, tls_router):
+    got_operator, got_observer = _publish_both(creds, tls_router, keys.operator_cmd_key(ROBOT),
+                                               writer_role="operator", intruder_role="observer",
+                                               listener_role="controller", n=10)
+    assert (got_operator, got_observer) == (10, 0)
+
+
+# ----- the router command -------------------------------------------------------
+def test_router_command_enforces_its_config_file_and_stops_on_sigterm(creds, tmp_path):
+    endpoint = f"tcp/127.0.0.1:{free_loopback_port()}"
+    config = write_config(tmp_path / "router.json5", router_config(creds, [endpoint]), "test router")
+    proc = subprocess.Popen([sys.executable, "-m", "sharedctl.services.cli", "router", "--config", str(config),
+                             "--duration", "60"], stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    try:
+        banner = proc.stdout.readline()
+        assert "usrpwd on" in banner and "ACL on" in banner, banner
+        session = _open(_client("observer", creds, endpoint))
+        session.close()
+        assert _refused(_client("observer", creds, endpoint, **{"transport/auth": None}))
+        proc.send_signal(signal.SIGTERM)
+        assert proc.wait(timeout=5) == 0
+    finally:
+        reap([proc])
+        proc.stdout.close()
