@@ -5,6 +5,8 @@
                          [--zenoh-listen EP]… [--zenoh-connect EP]… [--robot-id ID]
                          [--rate 500] [--telemetry-rate 50] [--torque-limit 60] [--duration S]
                          [--feedback-timeout-ms 50] [--priority realtime|high|normal] [--quiet]
+                         [--lease implicit|explicit] [--lease-expiry-ms 1000] [--max-command-age-ms 500]
+                         [--max-clock-skew-ms MS]
 """
 from __future__ import annotations
 
@@ -46,6 +48,16 @@ def add_parser(subparsers) -> None:
                    help="scheduling: realtime = nice -10 and SCHED_FIFO 20 for the loop thread (default; falls back "
                         "when not permitted), high = nice -10 only, normal")
     p.add_argument("--quiet", action="store_true", help="no warnings on stderr (events are still published)")
+    p.add_argument("--lease", choices=("implicit", "explicit"), default="implicit",
+                   help="operator authority lease: implicit = a command while nobody holds control takes it "
+                        "(default); explicit = only a take on the lease queryable (or in-band) grants control")
+    p.add_argument("--lease-expiry-ms", type=float, default=1000.0,
+                   help="the lease is free again after this long without a command or take from its holder (default 1000)")
+    p.add_argument("--max-command-age-ms", type=float, default=500.0,
+                   help="drop operator messages arriving this much later than the session's best delivery (default 500)")
+    p.add_argument("--max-clock-skew-ms", type=float,
+                   help="drop operator messages whose |receive wall time - send_time| exceeds this (only for hosts "
+                        "synchronised by chrony/PTP; default: no absolute bound)")
     p.set_defaults(handler=run)
 
 
@@ -55,6 +67,9 @@ def run(args) -> int:
         robot_id = check_robot_id(args.robot_id)
         if not (args.rate > 0 and args.telemetry_rate > 0 and args.torque_limit > 0 and args.feedback_timeout_ms > 0):
             raise ValueError("--rate, --telemetry-rate, --torque-limit and --feedback-timeout-ms must be positive")
+        if not (args.lease_expiry_ms > 0 and args.max_command_age_ms > 0
+                and (args.max_clock_skew_ms is None or args.max_clock_skew_ms > 0)):
+            raise ValueError("--lease-expiry-ms, --max-command-age-ms and --max-clock-skew-ms must be positive")
         scenario = load(args.scenario)
         loop, q0, _ = scenario.closed_loop(args.controller)
         spec = can_bus.spec_from_args(args)
@@ -67,7 +82,9 @@ def run(args) -> int:
     config = DaemonConfig(
         robot_id=robot_id, rate=args.rate, telemetry_rate=args.telemetry_rate, torque_limit=args.torque_limit,
         feedback_timeout=args.feedback_timeout_ms / 1e3, duration=args.duration, verbose=not args.quiet,
-        realtime=args.priority == "realtime",
+        realtime=args.priority == "realtime", lease_mode=args.lease, lease_expiry=args.lease_expiry_ms / 1e3,
+        max_command_age=args.max_command_age_ms / 1e3,
+        max_clock_skew=None if args.max_clock_skew_ms is None else args.max_clock_skew_ms / 1e3,
     )
     bus = session = daemon = None
     priority = raise_nice(args.priority)   # before Zenoh and CAN start their threads (they inherit it)

@@ -34,9 +34,12 @@ from sharedctl.protocol.wire_types import Dims
 from sharedctl.shared_controller import NonFiniteCommand, SharedController
 
 from ..lifecycle import RateClock
+from . import lease_queries
 from .can_master import CanMaster
+from .lease import DEFAULT_EXPIRY, LeaseMode, OperatorLease
 from .odometry import WheelOdometry, feedback_ages
 from .operator_input import OperatorInputPolicy
+from .replay_guard import DEFAULT_MAX_AGE, ReplayGuard
 from .telemetry import EventLimiter, Link, robot_state
 
 ROLE = "controller"
@@ -61,6 +64,10 @@ class DaemonConfig:
     event_interval: float = 1.0         # s between events of one topic
     verbose: bool = True                # warnings and errors to stderr
     realtime: bool = False              # the loop thread asks for SCHED_FIFO (priority.py)
+    lease_mode: str = LeaseMode.IMPLICIT  # implicit: a command takes a free lease; explicit: only a take (lease.py)
+    lease_expiry: float = DEFAULT_EXPIRY  # s without commands/takes from the holder → lease free
+    max_command_age: float = DEFAULT_MAX_AGE  # s later than the session's best delivery → stale (replay_guard.py)
+    max_clock_skew: float | None = None   # s, |receive wall − send_time| bound; None: hosts not synchronised
 
 
 class LatenessHistogram:
@@ -135,7 +142,10 @@ class ControllerDaemon:
         self.state = self.controller.initial_state(q0, loop.theta_hat0)
         self.dims = Dims(dof=self.model.n, n_theta=self.model.n_theta, n_wheels=3)
         self.odometry = WheelOdometry(self.model, q0)
-        self.policy = OperatorInputPolicy(loop.human.kp, config.operator_timeout, self.dims)
+        self.policy = OperatorInputPolicy(loop.human.kp, config.operator_timeout, self.dims,
+                                          lease=OperatorLease(config.lease_expiry, config.lease_mode),
+                                          guard=ReplayGuard(config.max_command_age, config.max_clock_skew))
+        self.lease_guard = ReplayGuard(config.max_command_age, config.max_clock_skew)   # lease queries' own
         self.master = CanMaster(bus, arm_timeout=config.arm_timeout)
         self.session = session
         self.events = EventLimiter(config.event_interval, ROLE)
@@ -156,7 +166,7 @@ class ControllerDaemon:
         self.started_at = time.monotonic()
         self.last_authority = None
         self.last_set_class = None
-        self.last_holder = None
+        self.lease_holder = None
         self.last_hands_off_reason = None
         self.last_rejected = 0
         self.histogram = LatenessHistogram()     # tick lateness (jitter)
@@ -173,6 +183,7 @@ class ControllerDaemon:
         self.alive_pub = session.declare_publisher(keys.alive_key(robot, ROLE))
         self.token = session.liveliness().declare_token(keys.alive_key(robot, ROLE))
         self.subscriber = session.declare_subscriber(keys.operator_cmd_key(robot), self._on_command)
+        self.queryable = session.declare_queryable(keys.lease_key(robot), self._on_lease_query)
 
     def _on_command(self, sample) -> None:
         """Zenoh callback thread: hand the payload to the policy (which never raises)."""
@@ -183,8 +194,22 @@ class ControllerDaemon:
         with self.lock:
             self.policy.offer(payload, time.monotonic(), time.time())
 
+    def _on_lease_query(self, query) -> None:
+        """Zenoh callback thread: take/release control (lease_queries.py); every query gets a reply."""
+        try:
+            payload = query.payload.to_bytes() if query.payload is not None else b""
+        except Exception:  # noqa: BLE001
+            payload = b""
+        with self.lock:
+            reply = lease_queries.answer(payload, self.policy.lease, self.lease_guard, self.policy.rejections,
+                                         time.monotonic(), time.time())
+        try:
+            query.reply(keys.lease_key(self.config.robot_id), encode_message(reply))
+        except Exception as exc:  # noqa: BLE001 — a vanished querier must not stop anything
+            print(f"sharedctl controller: lease reply not sent: {exc}", file=sys.stderr)
+
     def undeclare(self) -> None:
-        for entity in (self.subscriber, self.token, self.state_pub, self.event_pub, self.alive_pub):
+        for entity in (self.subscriber, self.queryable, self.token, self.state_pub, self.event_pub, self.alive_pub):
             try:
                 entity.undeclare()
             except Exception:  # noqa: BLE001 — closing anyway
@@ -257,18 +282,19 @@ class ControllerDaemon:
             current = self.policy.current
             rejected = self.policy.rejected
             rejections = dict(self.policy.rejections)
+            lease_changes = self.policy.lease.take_changes()
+            self.lease_holder = self.policy.lease.holder_id
         self.status = status
         self.feedback_age = feedback_age
         if rejected != self.last_rejected:
             self.last_rejected = rejected
-            self.emit(now, "rejection", "rejection", "warning", f"operator commands rejected so far: {rejections}")
+            self.emit(now, "rejection", "rejection", "warning", f"operator messages rejected so far: {rejections}")
         if status.reason != self.last_hands_off_reason:
             self.last_hands_off_reason = status.reason
             self.emit(now, "operator", "info", "info", f"operator input: {status.reason}")
-        holder = None if status.hands_off else status.operator_id
-        if holder != self.last_holder:
-            self.emit(now, "lease", "lease_change", "info", f"operator in control: {holder or 'none'}")
-            self.last_holder = holder
+        for change in lease_changes:
+            self.emit(now, f"lease:{change.cause}", "lease_change", "info",
+                      f"lease {change.cause}: control {change.before or 'free'} -> {change.after or 'free'}")
 
         if status.estop_requested and self.mode is not Mode.ESTOPPED:
             self.estop(now, "estop requested by the operator")
@@ -347,6 +373,7 @@ class ControllerDaemon:
             latency=status.latency, loss_fraction=status.loss_fraction,
             staleness=status.staleness if math.isfinite(status.staleness) else now - self.started_at,
             can_feedback_age=self.feedback_age if math.isfinite(self.feedback_age) else now - self.started_at,
+            rejected=self.last_rejected,
         )
         v_used = self.out.v_used if self.out is not None and self.mode is Mode.RUNNING else self.v
         self.state_seq += 1
@@ -354,7 +381,7 @@ class ControllerDaemon:
             msg = robot_state(
                 self.state_seq, time.time(), self.q, v_used, self.out, self.loop.feasible, self.loop.sharing.bands,
                 self.tau, self.u_s, self.mode is Mode.ESTOPPED,
-                status.operator_id if not status.hands_off else None, link,
+                self.lease_holder, link,
                 self.out.theta_estimate if self.out is not None else self.state.theta_hat,
             )
             self.state_pub.put(encode_message(msg, self.dims))

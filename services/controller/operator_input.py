@@ -5,9 +5,19 @@ Pure: payload bytes and reception times in, `OperatorInput` out; the caller supp
 * The joystick spring (44): u_h = k_p ∘ d with d the normalised deflection in [−1, 1];
   the intent (45): v_h = ½ Σ_j k_p,j d_j².
 * The wish: q_d, q̇_d, q̈_d as sent (`sharedctl.transform.Desired`).
-* Ordering: per session, only a seq newer than the newest accepted one is taken; older and
-  duplicate seqs are ignored (and counted). A new session id starts its own sequence (an
-  operator restart); the most recently accepted command, of any session, is the current one.
+* Ordering and age (`replay_guard.py`): per session, only a seq newer than the newest accepted
+  one is taken (duplicates and older seqs are dropped and counted), and a command arriving more
+  than 0.5 s later than the session's best delivery is `stale` (the clock offset between the
+  hosts cancels; an absolute `max_skew` bound is optional). A new session id starts its own
+  sequence (an operator restart).
+* Authority (`lease.py`): only the lease holder's commands drive (`not_holder` / `no_lease`
+  otherwise, counted); a command's control_request is an in-band take/release; in the default
+  implicit mode a command while nobody holds the lease takes it. The holder's last accepted
+  command is the current one; once the lease is released or expired it no longer drives
+  (reason `no_lease`, hands-off).
+* Estop: an `estop` in any well-formed command — from any operator, holder or not, even one
+  dropped as stale, duplicated or out of order — latches `estop_requested` (fail-safe: a replay
+  can stop the robot, never move it).
 * Hands-off (u_h = 0, v_h = 0, wish held at the last q_d with zero rates) when the operator
   has been silent for more than `timeout` (0.3 s), the deadman is released, or the last
   payload was rejected (malformed or invalid: a `ProtocolError` from the decoder). Before
@@ -31,6 +41,9 @@ from sharedctl.protocol.wire_types import ROBOT_DIMS, Dims
 from sharedctl.shared_controller import OperatorInput
 from sharedctl.transform import Desired
 
+from .lease import OperatorLease
+from .replay_guard import ReplayGuard
+
 DEFAULT_TIMEOUT = 0.3   # s of operator silence before hands-off
 
 
@@ -39,7 +52,7 @@ class OperatorStatus:
     """What the policy decided at one instant (for telemetry and events)."""
 
     hands_off: bool
-    reason: str                  # "active", "no_command", "stale", "deadman", "rejected"
+    reason: str                  # "active", "no_command", "stale", "deadman", "rejected", "no_lease"
     staleness: float             # s since the last accepted command (inf before any)
     latency: float               # s, receive time − send time of the last accepted command (0 if unknown)
     loss_fraction: float         # seq gaps over the recent window of the current session
@@ -63,7 +76,8 @@ class OperatorInputPolicy:
     last_rejected: bool = False
     estop_requested: bool = False
     take_requests: int = 0                   # accepted commands asking control_request = take
-    _newest_seq: dict = field(default_factory=dict)      # session_id → newest accepted seq
+    lease: OperatorLease = field(default_factory=OperatorLease)   # who may command (lease.py)
+    guard: ReplayGuard = field(default_factory=ReplayGuard)       # order and age (replay_guard.py)
     _recent: deque = field(default_factory=deque)        # seqs of the current session
 
     def __post_init__(self) -> None:
@@ -88,14 +102,19 @@ class OperatorInputPolicy:
         return self.accept(command, now, wall_now)
 
     def accept(self, command: OperatorCommand, now: float, wall_now: float | None = None) -> bool:
-        """Apply the ordering policy to a decoded command."""
-        newest = self._newest_seq.get(command.session_id)
-        if newest is not None and command.seq <= newest:
-            self.rejections["duplicate_seq" if command.seq == newest else "out_of_order_seq"] += 1
+        """Apply the estop, ordering, age and lease policy to a decoded command."""
+        if command.estop:
+            self.estop_requested = True          # honoured from anyone, before any other check
+        reason = self.guard.admit(command.session_id, command.seq, command.send_time, now, wall_now)
+        if reason is None:
+            reason = self.lease.admit_command(command.operator_id, command.session_id, command.control_request, now)
+        if reason == "released":
+            return False                         # the holder let go: not a rejection
+        if reason is not None:
+            self.rejections[reason] += 1
             return False
         if self.current is None or command.session_id != self.current.session_id:
             self._recent.clear()
-        self._newest_seq[command.session_id] = command.seq
         self._recent.append(command.seq)
         while len(self._recent) > self.loss_window:
             self._recent.popleft()
@@ -105,8 +124,6 @@ class OperatorInputPolicy:
         if wall_now is not None:
             latency = wall_now - command.send_time
             self.latency = latency if 0.0 <= latency < 60.0 else 0.0
-        if command.estop:
-            self.estop_requested = True
         if command.control_request is ControlRequest.TAKE:
             self.take_requests += 1
         return True
@@ -121,6 +138,8 @@ class OperatorInputPolicy:
             reason = "no_command"
         elif self.last_rejected:
             reason = "rejected"
+        elif not self.lease.holds(self.current.operator_id, self.current.session_id, now):
+            reason = "no_lease"
         elif staleness > self.timeout:
             reason = "stale"
         elif not self.current.deadman:

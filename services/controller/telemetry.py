@@ -17,8 +17,9 @@ RobotState field mapping (see the daemon's docstring for where each value comes 
   wheel_torques   τ actually sent (after the torque-limit scaling)
   theta_hat       StepOutput.theta_estimate (the scenario's θ̂0 before the first step)
   min_margin      FeasibleSet.margin(q); region_margins FeasibleSet.region_margins(q)
-  lease_holder    operator_id of the current command while the operator is not hands-off
-  link            latency from send_time, loss from seq gaps, staleness, oldest wheel feedback age
+  lease_holder    operator_id holding the authority lease (lease.py), None while it is free
+  link            latency from send_time, loss from seq gaps, staleness, oldest wheel feedback age,
+                  rejected_messages (every refused operator command and lease request)
 """
 from __future__ import annotations
 
@@ -61,6 +62,7 @@ class Link:
     loss_fraction: float
     staleness: float        # s (inf: never heard)
     can_feedback_age: float  # s (inf: never heard)
+    rejected: int = 0        # operator messages refused since start (commands and lease requests)
 
 
 def robot_state(
@@ -91,6 +93,7 @@ def robot_state(
         link=LinkHealth(
             operator_latency_ms=_ms(link.latency), loss_fraction=float(min(max(link.loss_fraction, 0.0), 1.0)),
             staleness_ms=_ms(link.staleness), can_feedback_age_ms=_ms(link.can_feedback_age),
+            rejected_messages=max(int(link.rejected), 0),
         ),
     )
 

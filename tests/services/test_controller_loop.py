@@ -45,7 +45,7 @@ class Publisher:
 
 
 class MemorySession:
-    """declare_publisher / declare_subscriber / liveliness().declare_token, kept in dicts."""
+    """declare_publisher / declare_subscriber / declare_queryable / liveliness().declare_token, kept in dicts."""
 
     def __init__(self):
         self.publishers, self.callbacks = {}, {}
@@ -54,6 +54,10 @@ class MemorySession:
         return self.publishers.setdefault(key, Publisher())
 
     def declare_subscriber(self, key, callback):
+        self.callbacks[key] = callback
+        return Publisher()
+
+    def declare_queryable(self, key, callback):
         self.callbacks[key] = callback
         return Publisher()
 

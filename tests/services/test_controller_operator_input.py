@@ -77,11 +77,13 @@ def test_older_and_duplicate_seqs_are_ignored_and_counted():
     assert policy.rejections == {"duplicate_seq": 1, "out_of_order_seq": 1}
 
 
-def test_a_new_session_starts_its_own_sequence():
+def test_a_new_session_starts_its_own_sequence_once_the_old_one_has_let_go():
     policy = OperatorInputPolicy(KP)
     offer(policy, command(100, session="old"), now=10.0)
-    assert offer(policy, command(1, session="new", joystick=(0.0, 1.0, 0.0)), now=10.1)
-    np.testing.assert_allclose(policy.operator_input(10.1, POSE)[0].force, [0.0, 20.0, 0.0])
+    assert not offer(policy, command(1, session="new"), now=10.1)     # the old session still holds the lease
+    assert policy.rejections == {"not_holder": 1}
+    assert offer(policy, command(2, session="new", joystick=(0.0, 1.0, 0.0)), now=11.1)   # lease expired (1 s)
+    np.testing.assert_allclose(policy.operator_input(11.1, POSE)[0].force, [0.0, 20.0, 0.0])
 
 
 def test_malformed_payloads_are_counted_not_raised_and_make_the_operator_hands_off():
