@@ -50,12 +50,13 @@ def check_endpoint(endpoint: str) -> str:
     return check_loopback(endpoint)
 
 
-def _endpoint_list(value) -> list[str]:
-    """Endpoints as Zenoh allows them: a list, or a map mode -> list."""
+def _endpoint_list(value, mode: str) -> list[str]:
+    """The endpoints a node in `mode` uses: Zenoh allows a list, or a map mode -> list (its
+    defaults are such a map: a router listens on tcp/[::]:7447, a peer on tcp/[::]:0)."""
     if value is None:
         return []
     if isinstance(value, dict):
-        return [e for v in value.values() for e in _endpoint_list(v)]
+        return _endpoint_list(value.get(mode), mode)
     if isinstance(value, list):
         return list(value)
     raise ZenohConfigError(f"endpoints must be a list, not {value!r}")
@@ -83,7 +84,7 @@ def enforce_rules(cfg: zenoh.Config, base_dir: Path | None = None) -> zenoh.Conf
         _insert(cfg, key, False)
     for key in ("listen/endpoints", "connect/endpoints"):
         try:
-            for endpoint in _endpoint_list(_get(cfg, key)):
+            for endpoint in _endpoint_list(_get(cfg, key), mode_of(cfg)):
                 check_endpoint(endpoint)
         except EndpointError as exc:
             raise ZenohConfigError(f"{key}: {exc}") from exc
