@@ -38,6 +38,7 @@ from sharedctl.scenario import ScenarioError
 
 from .children import Child, free_udp_port, raise_priority, start_child, udp_receive_buffer_errors, wait_listening
 from .faults.stack import FaultStack, add_arguments as add_fault_arguments
+from .recording.launch import add_argument as add_record_argument, open_demo_recording
 from .demo_measure import TOLERANCE, Recorder, deviation, measure, plant_reference_run, reference_run
 from .lifecycle import StopFlag
 from .scenario_files import load
@@ -63,6 +64,7 @@ def add_parser(subparsers) -> None:
     p.add_argument("--no-reference", action="store_true", help="skip the in-process sampled reference run")
     p.add_argument("--log-dir", metavar="DIR", help="keep the children's output here (default: a temporary directory, removed on success)")
     add_fault_arguments(p)
+    add_record_argument(p)
     p.set_defaults(handler=run)
 
 
@@ -100,11 +102,13 @@ def run(args) -> int:
     rec = Recorder(loop.feasible)
     udp_errors_before = udp_receive_buffer_errors()
     children: dict[str, Child] = {}
-    session = None
+    session = recording = recording_summary = None
     failure = None
     robot_priority = None
     start = time.monotonic()
     try:
+        recording = open_demo_recording(args.record, args.robot_id, scenario_arg, scenario.name, can_controller,
+                                        seed=None if faults.empty else faults.plan.seed)   # docs/recording.md
         faults.start(controller_ep, args.robot_id, log_dir, backstop, start_child, wait_listening)
         children["robot"] = start_child("robot", ["robot", "--scenario", scenario_arg, "--zenoh-listen", robot_ep, *can_robot,
                                                   *common, "--duration", backstop], log_dir)
@@ -114,6 +118,7 @@ def run(args) -> int:
         # the console before the controller: its start-up (imports, a CPU burst) is over before the
         # controller runs its feedback timeout; it connects when the controller listens (Zenoh retries)
         console_argv = ["console", "--script", scenario_arg, "--zenoh-connect", console_ep, *common]
+        console_argv += ["--zenoh-connect", recording.endpoint] if recording is not None else []
         children["console"] = start_child("console", console_argv + ([] if interactive else ["--headless"]), log_dir,
                                           interactive=interactive)
         controller_argv = ["controller", "--scenario", scenario_arg, *law, "--zenoh-listen", controller_ep,
@@ -122,6 +127,8 @@ def run(args) -> int:
         if not wait_listening(controller_ep, children["controller"], STARTUP_TIMEOUT):
             raise RuntimeError(f"controller did not come up on {controller_ep}")
         session = open_session(connect=[robot_ep, controller_ep])
+        if recording is not None:
+            recording.attach(session)
         subscribers = [session.declare_subscriber(keys.truth_key(args.robot_id), rec.on_truth),
                 session.declare_subscriber(keys.state_key(args.robot_id), rec.on_state),
                 session.declare_subscriber(keys.events_key(args.robot_id), rec.on_event)]
@@ -156,6 +163,7 @@ def run(args) -> int:
                 children[name].stop()
         faults.stop()
         time.sleep(0.1)    # the last ground truth samples
+        recording_summary = recording.close() if recording is not None else None
         if session is not None:
             session.close()
     result = measure(rec, rec.operator_start, duration)
@@ -168,6 +176,8 @@ def run(args) -> int:
                "processes": {name: children[name].report() for name in ("console", "controller", "robot") if name in children},
                "endpoints": {"robot": robot_ep, "controller": controller_ep, "can": " ".join(can[1:])},
                "wall_seconds": time.monotonic() - start}
+    if recording is not None:
+        summary["recording"] = recording_summary
     if not args.no_reference and failure is None:
         summary["reference"] = reference_run(scenario, args.controller, duration)
         summary["deviation"] = deviation(result, summary["reference"])
@@ -225,5 +235,7 @@ def _print_table(summary: dict) -> None:
         table.add_row(f"{name} exit", f"{proc['exit_code']}" + (" (killed)" if proc["killed"] else ""),
                       "" if stop is None else f"stopped in {stop:.2f} s", "")
     table.add_row("estops", str(summary["estops"]), "", "")
+    if summary.get("recording"):
+        table.add_row("recording", summary["recording"]["mcap"], f"{summary['recording']['messages']} messages", "")
     table.add_row("result", "[green]OK[/green]" if summary["ok"] else "[red]FAILED[/red]", "", "")
     Console().print(table)

@@ -21,7 +21,8 @@ def add_parser(subparsers) -> None:
     p.add_argument("--headless", action="store_true", help="no dashboard, no keyboard; print one line at the end")
     p.add_argument("--duration", type=float, metavar="S", help="stop after S seconds (default: until SIGINT/SIGTERM)")
     link = p.add_mutually_exclusive_group()
-    link.add_argument("--zenoh-connect", metavar="EP", help=f"connect to a loopback endpoint (default {DEFAULT_ENDPOINT})")
+    link.add_argument("--zenoh-connect", metavar="EP", action="append",
+                      help=f"connect to a loopback endpoint (repeatable; default {DEFAULT_ENDPOINT})")
     link.add_argument("--zenoh-listen", metavar="EP", help="listen on a loopback endpoint instead")
     zenoh_config.add_argument(p)
     p.add_argument("--robot-id", default="robot1", help="robot id in the key expressions (default robot1)")
@@ -49,7 +50,7 @@ def run(args) -> int:
         scenario=scenario, script=args.script is not None, headless=not interactive, duration=args.duration,
         listen=[args.zenoh_listen] if args.zenoh_listen else None,
         connect=None if args.zenoh_listen or (args.zenoh_config and not args.zenoh_connect)
-        else [args.zenoh_connect or DEFAULT_ENDPOINT], zenoh_config=args.zenoh_config,
+        else (args.zenoh_connect or [DEFAULT_ENDPOINT]), zenoh_config=args.zenoh_config,
         robot_id=args.robot_id, operator_id=args.operator_id, rate=args.rate, deadman_mode=args.deadman,
     )
     try:

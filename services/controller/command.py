@@ -22,6 +22,7 @@ from ..lifecycle import StopFlag
 from ..scenario_files import load
 from .daemon import ControllerDaemon, DaemonConfig
 from .priority import LEVELS, make_loop_realtime, raise_nice
+from ..recording.launch import add_argument as add_record_argument, open_process_recording, summary_line
 
 PROG = "sharedctl controller"
 
@@ -31,6 +32,7 @@ def add_parser(subparsers) -> None:
     p.add_argument("--scenario", default="paper_convex", help="scenario TOML file or packaged name (default: paper_convex)")
     p.add_argument("--controller", choices=("ce", "nce", "of"), help="machine law (default: the scenario's, else ce)")
     can_bus.add_arguments(p)
+    add_record_argument(p)
     p.add_argument("--zenoh-listen", metavar="EP", action="append",
                    help=f"listen on this loopback endpoint (repeatable; default {zenoh_session.DEFAULT_ENDPOINT} "
                         "unless --zenoh-connect is given)")
@@ -86,11 +88,13 @@ def run(args) -> int:
         max_command_age=args.max_command_age_ms / 1e3,
         max_clock_skew=None if args.max_clock_skew_ms is None else args.max_clock_skew_ms / 1e3,
     )
-    bus = session = daemon = None
+    bus = session = daemon = recording = None
     priority = raise_nice(args.priority)   # before Zenoh and CAN start their threads (they inherit it)
     try:
         bus = can_bus.open_bus(spec)
         session = zenoh_config.open_configured(args.zenoh_config, listen, connect)
+        recording = open_process_recording(args.record, "controller", robot_id, args.scenario, scenario.name,
+                                           session, spec)   # --record DIR: docs/recording.md
         daemon = ControllerDaemon(config, loop, q0, bus, session)
         daemon.realtime = config.realtime and make_loop_realtime()   # this thread runs the loop
         zenoh_desc = " ".join([f"listen {e}" for e in listen] + [f"connect {e}" for e in connect])
@@ -110,6 +114,8 @@ def run(args) -> int:
     finally:
         if daemon is not None:
             daemon.undeclare()
+        if recording is not None:
+            print(summary_line(recording.close()), flush=True)
         if session is not None:
             session.close()
         if bus is not None:

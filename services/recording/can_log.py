@@ -20,6 +20,7 @@ from pathlib import Path
 import can
 
 from .. import can_bus
+from .background import lower_this_thread
 
 FLUSH_PERIOD = 0.25                    # s between flushes of the log file
 UDP_LOG_CHANNEL = "udpmcast0"          # interface name written for frames from python-can's udp_multicast
@@ -54,6 +55,7 @@ class CanLogger:
         self._thread.start()
 
     def _run(self) -> None:
+        lower_this_thread()
         next_flush = time.monotonic() + self.flush_period
         pending = False
         while not self._stop.is_set():

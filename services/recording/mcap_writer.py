@@ -35,6 +35,7 @@ from mcap.writer import CompressionType, Writer
 from sharedctl.protocol.errors import ProtocolError
 from sharedctl.protocol.msgpack_codec import decode_message, to_map
 
+from .background import lower_this_thread
 from .json_schemas import (
     MESSAGE_ENCODING,
     MESSAGE_SCHEMAS,
@@ -129,6 +130,7 @@ class McapRecorder:
 
     # ----- the writer thread -----------------------------------------------------------
     def _run(self) -> None:
+        lower_this_thread()
         next_flush = time.monotonic() + self.flush_period
         dirty = False
         while True:
