@@ -1,0 +1,47 @@
+"""`sharedctl demo --fault …`: an operator fault, a CAN fault and a controller kill wired into a
+real run; the JSON shows what was injected, and the run is judged as services/faults/stack.py says
+(0 ground-truth violations, every process not killed on purpose exits cleanly)."""
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+pytestmark = pytest.mark.processes
+
+FAULTS = ["operator.loss=0.3", "operator.delay_ms=200", "can.loss=0.02", "controller.kill_at=2"]
+
+
+def test_demo_with_faults_reports_what_was_injected(tmp_path):
+    out = tmp_path / "demo.json"
+    argv = [sys.executable, "-m", "sharedctl.services.cli", "demo", "--headless", "--duration", "4", "--no-reference",
+            "--feedback-timeout-ms", "150", "--json", str(out), "--log-dir", str(tmp_path / "logs"), "--fault-seed", "1"]
+    for spec in FAULTS:
+        argv += ["--fault", spec]
+    proc = subprocess.run(argv, capture_output=True, timeout=120)
+    summary = json.loads(out.read_text())
+    assert summary["faults"] == FAULTS
+    assert summary["ok"] is True and proc.returncode == 0, proc.stderr.decode()[-2000:]
+    assert summary["violations"] == 0 and summary["truth_samples"] > 0
+
+    injected = summary["injected"]
+    operator = injected["relay"]["operator"]
+    assert operator["received"] > 50 and abs(operator["measured_drop_rate"] - 0.3) < 0.15
+    assert operator["latency_ms_mean"] >= 200
+    assert injected["relay"]["telemetry"]["stages"] == [] and injected["relay"]["exit_code"] == 0
+    can = injected["gateway"]
+    assert can["command"]["received"] > 1000 and can["command"]["lost"] > 0 and can["feedback"]["lost"] > 0
+    kill, = injected["processes"]
+    assert kill["action"] == "kill" and 2.0 <= kill["done_at"] < 3.0
+    assert injected["killed"][0]["exit_code"] == -9
+    for name in ("console", "robot"):
+        assert summary["processes"][name]["exit_code"] == 0
+    for pid in [kill["pid"], *(p["pid"] for p in summary["processes"].values())]:
+        assert not Path(f"/proc/{pid}").exists() or b"sharedctl" not in Path(f"/proc/{pid}/cmdline").read_bytes()
+
+
+def test_demo_refuses_a_bad_fault_spec():
+    proc = subprocess.run([sys.executable, "-m", "sharedctl.services.cli", "demo", "--headless",
+                           "--fault", "operator.loss=2"], capture_output=True, timeout=60)
+    assert proc.returncode == 2 and b"operator.loss=2" in proc.stderr
