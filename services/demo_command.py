@@ -38,6 +38,7 @@ from sharedctl.scenario import ScenarioError
 
 from .children import Child, free_udp_port, raise_priority, start_child, udp_receive_buffer_errors, wait_listening
 from .faults.stack import FaultStack, add_arguments as add_fault_arguments
+from .security.secure_stack import SecureStack, add_arguments as add_secure_arguments
 from .recording.launch import add_argument as add_record_argument, open_demo_recording
 from .demo_measure import TOLERANCE, Recorder, deviation, measure, plant_reference_run, reference_run
 from .lifecycle import StopFlag
@@ -57,7 +58,8 @@ def add_parser(subparsers) -> None:
     p.add_argument("--duration", type=float, metavar="S", help="run length (default: the scenario's duration)")
     p.add_argument("--headless", action="store_true", help="no live dashboard even with a terminal")
     p.add_argument("--json", metavar="OUT", help="write the summary as JSON to OUT ('-' for stdout)")
-    p.add_argument("--zenoh-listen", metavar="ENDPOINT", help="the controller's endpoint (default: a free loopback port)")
+    p.add_argument("--zenoh-listen", metavar="ENDPOINT",
+                   help="the controller's endpoint, with --secure the router's (default: a free loopback port)")
     p.add_argument("--robot-id", default="robot1", help="robot id in the key expressions (default robot1)")
     p.add_argument("--feedback-timeout-ms", type=float, metavar="MS",
                    help="passed to the controller: CAN feedback age that triggers Estop (default: the controller's, 50)")
@@ -65,6 +67,7 @@ def add_parser(subparsers) -> None:
     p.add_argument("--log-dir", metavar="DIR", help="keep the children's output here (default: a temporary directory, removed on success)")
     add_fault_arguments(p)
     add_record_argument(p)
+    add_secure_arguments(p)
     p.set_defaults(handler=run)
 
 
@@ -75,7 +78,9 @@ def run(args) -> int:
     try:
         scenario = load(args.scenario)
         loop, _, _ = scenario.closed_loop(args.controller)
-        controller_ep = check_loopback(args.zenoh_listen) if args.zenoh_listen else f"tcp/127.0.0.1:{free_loopback_port()}"
+        secure = SecureStack.from_args(args, free_loopback_port)   # --secure: see services/security/secure_stack.py
+        controller_ep = (check_loopback(args.zenoh_listen) if args.zenoh_listen and not secure.enabled
+                         else f"tcp/127.0.0.1:{free_loopback_port()}")
         keys.check_robot_id(args.robot_id)
         faults = FaultStack.from_args(args)   # --fault SPEC: see services/faults/stack.py
     except (ScenarioError, EndpointError, ValueError) as exc:
@@ -110,23 +115,29 @@ def run(args) -> int:
         recording = open_demo_recording(args.record, args.robot_id, scenario_arg, scenario.name, can_controller,
                                         seed=None if faults.empty else faults.plan.seed)   # docs/recording.md
         faults.start(controller_ep, args.robot_id, log_dir, backstop, start_child, wait_listening)
-        children["robot"] = start_child("robot", ["robot", "--scenario", scenario_arg, "--zenoh-listen", robot_ep, *can_robot,
+        secure.start(log_dir, backstop, start_child, wait_listening)
+        children["robot"] = start_child("robot", ["robot", "--scenario", scenario_arg,
+                                                  *secure.zenoh_args("robot", ["--zenoh-listen", robot_ep]), *can_robot,
                                                   *common, "--duration", backstop], log_dir)
         robot_priority = raise_priority(children["robot"].popen.pid)
-        if not wait_listening(robot_ep, children["robot"], STARTUP_TIMEOUT):
+        if not secure.wait_up("robot", args.robot_id, children["robot"], STARTUP_TIMEOUT,
+                              lambda: wait_listening(robot_ep, children["robot"], STARTUP_TIMEOUT)):
             raise RuntimeError(f"robot did not come up on {robot_ep}")
         # the console before the controller: its start-up (imports, a CPU burst) is over before the
         # controller runs its feedback timeout; it connects when the controller listens (Zenoh retries)
-        console_argv = ["console", "--script", scenario_arg, "--zenoh-connect", console_ep, *common]
-        console_argv += ["--zenoh-connect", recording.endpoint] if recording is not None else []
+        console_argv = ["console", "--script", scenario_arg, *secure.zenoh_args("operator", ["--zenoh-connect", console_ep]),
+                        *common]
+        console_argv += ["--zenoh-connect", recording.endpoint] if recording is not None and not secure.enabled else []
         children["console"] = start_child("console", console_argv + ([] if interactive else ["--headless"]), log_dir,
                                           interactive=interactive)
-        controller_argv = ["controller", "--scenario", scenario_arg, *law, "--zenoh-listen", controller_ep,
+        controller_argv = ["controller", "--scenario", scenario_arg, *law,
+                           *secure.zenoh_args("controller", ["--zenoh-listen", controller_ep]),
                            *can_controller, *common, "--duration", backstop]
         children["controller"] = start_child("controller", controller_argv, log_dir)
-        if not wait_listening(controller_ep, children["controller"], STARTUP_TIMEOUT):
+        if not secure.wait_up("controller", args.robot_id, children["controller"], STARTUP_TIMEOUT,
+                              lambda: wait_listening(controller_ep, children["controller"], STARTUP_TIMEOUT)):
             raise RuntimeError(f"controller did not come up on {controller_ep}")
-        session = open_session(connect=[robot_ep, controller_ep])
+        session = secure.open_session(lambda: open_session(connect=[robot_ep, controller_ep]))
         if recording is not None:
             recording.attach(session)
         subscribers = [session.declare_subscriber(keys.truth_key(args.robot_id), rec.on_truth),
@@ -166,6 +177,7 @@ def run(args) -> int:
         recording_summary = recording.close() if recording is not None else None
         if session is not None:
             session.close()
+        secure.stop()
     result = measure(rec, rec.operator_start, duration)
     udp_errors_after = udp_receive_buffer_errors()
     result["host_udp_receive_buffer_errors"] = (None if udp_errors_before is None or udp_errors_after is None
@@ -175,7 +187,7 @@ def run(args) -> int:
                "robot_priority": robot_priority,
                "processes": {name: children[name].report() for name in ("console", "controller", "robot") if name in children},
                "endpoints": {"robot": robot_ep, "controller": controller_ep, "can": " ".join(can[1:])},
-               "wall_seconds": time.monotonic() - start}
+               "wall_seconds": time.monotonic() - start, **secure.summary(rec)}
     if recording is not None:
         summary["recording"] = recording_summary
     if not args.no_reference and failure is None:
@@ -184,7 +196,7 @@ def run(args) -> int:
         summary["reference_plant"] = plant_reference_run(scenario, args.controller, duration)
         summary["deviation_plant"] = deviation(result, summary["reference_plant"])
         summary["tolerance"] = TOLERANCE
-    clean = all(c.clean for c in children.values()) and len(children) == 3
+    clean = all(c.clean for c in children.values()) and len(children) == 3 and secure.clean
     summary["ok"] = bool(failure is None and clean and result["violations"] == 0 and result["truth_samples"] > 0
                          and result["estops"] == 0)   # an estop means the scenario did not run
     if not faults.empty:   # intended faults: judged as services/faults/stack.py says

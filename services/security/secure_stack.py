@@ -1,0 +1,143 @@
+"""The secure side of `sharedctl demo --secure`: throw-away credentials, a router, per-role clients.
+
+`demo_command` calls this module in a few places; without ``--secure`` every method is inert
+and the demo is the plain peer-to-peer one.
+
+With ``--secure``:
+
+* a temporary directory gets a fresh site CA, the router's and each role's certificate, and
+  passwords (services/security/credentials.py), plus `router.json5` and `ROLE.json5`
+  (services/security/zenoh_config.py); it is removed when the demo ends;
+* a `sharedctl router --config router.json5` child listens on ``--zenoh-listen`` (default a free
+  `tls/127.0.0.1:PORT`: mutual TLS; a `tcp/` endpoint gives usrpwd without TLS) with
+  user/password authentication and the default-deny ACL of services/security/roles.py;
+* robot, controller and console run as clients of the router, each with its own role's
+  configuration (`--zenoh-config`), and the demo measures through an `observer` client:
+
+      router      listens  tls/127.0.0.1:S   (usrpwd + mTLS + ACL)
+      robot       client   role robot        (GroundTruth)
+      controller  client   role controller   (RobotState, Events; lease queryable)
+      console     client   role operator     (OperatorCommand, lease queries)
+      demo        client   role observer     (subscribes only)
+
+What the summary adds (``security``): the endpoint, what was enforced, the router's exit, and
+``rejected_messages`` — operator messages the controller refused (the last RobotState's
+`link.rejected_messages`). Messages the router's ACL dropped are not counted: Zenoh 1.10 drops
+them silently, with no counter or callback the Python API exposes.
+"""
+from __future__ import annotations
+
+import shutil
+import tempfile
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from sharedctl.protocol import keys
+
+from .credentials import Credentials, generate
+from .roles import ROLES
+from .zenoh_config import check_endpoint, client_config, open_from_file, router_config, write_config
+
+READY_TIMEOUT = 30.0   # s for the router to listen and a role to show its liveliness token
+
+
+def add_arguments(p) -> None:
+    p.add_argument("--secure", action="store_true",
+                   help="throw-away credentials and certificates; a router with usrpwd, mTLS and ACL; every process "
+                        "a client with its role's credentials (--zenoh-listen: the router's endpoint, tcp/ or tls/)")
+
+
+@dataclass
+class SecureStack:
+    enabled: bool = False
+    endpoint: str | None = None
+    directory: Path | None = None
+    creds: Credentials | None = None
+    configs: dict = field(default_factory=dict)       # role (and "router") -> Path
+    router: object | None = None                      # children.Child
+    session: object | None = None                     # the observer's zenoh.Session (the demo closes it)
+
+    @classmethod
+    def from_args(cls, args, free_port) -> "SecureStack":
+        """Inert without --secure; raises ValueError on a bad endpoint or an unsupported combination."""
+        if not getattr(args, "secure", False):
+            return cls()
+        if getattr(args, "fault", None):
+            raise ValueError("--secure with --fault is not supported (the fault relay is a plain peer)")
+        endpoint = check_endpoint(args.zenoh_listen) if args.zenoh_listen else f"tls/127.0.0.1:{free_port()}"
+        return cls(enabled=True, endpoint=endpoint)
+
+    # ----- the run ---------------------------------------------------------------
+    def start(self, log_dir: Path, backstop: str, start_child, wait_listening) -> None:
+        """Credentials and configs in a temporary directory, the router child, the observer session."""
+        if not self.enabled:
+            return
+        self.directory = Path(tempfile.mkdtemp(prefix="sharedctl-secure-"))
+        self.creds = generate(self.directory / "credentials", ROLES)
+        self.configs["router"] = write_config(self.directory / "router.json5",
+                                              router_config(self.creds, [self.endpoint]), "sharedctl demo --secure")
+        for role in ROLES:
+            self.configs[role] = write_config(self.directory / f"{role}.json5",
+                                              client_config(role, self.creds, [self.endpoint]), f"demo {role}")
+        self.router = start_child("router", ["router", "--config", str(self.configs["router"]),
+                                             "--duration", backstop], log_dir)
+        if not wait_listening(self.endpoint, self.router, READY_TIMEOUT):
+            raise RuntimeError(f"router did not come up on {self.endpoint}")
+        self.session = open_from_file(self.configs["observer"])
+
+    def zenoh_args(self, role: str, plain: list[str]) -> list[str]:
+        """A child's Zenoh arguments: its role's configuration file, or `plain` when not secure."""
+        return ["--zenoh-config", str(self.configs[role])] if self.enabled else plain
+
+    def wait_up(self, role: str, robot_id: str, child, timeout: float, plain_wait) -> bool:
+        """Secure: the role's liveliness token is visible through the router; else `plain_wait()`."""
+        if not self.enabled:
+            return plain_wait()
+        key = keys.alive_key(robot_id, role)
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            if child.popen.poll() is not None:
+                return False
+            if any(reply.ok is not None for reply in self.session.liveliness().get(key, timeout=0.5)):
+                return True
+            time.sleep(0.05)
+        return False
+
+    def open_session(self, plain_open):
+        """The demo's measuring session: the observer's (opened in `start`), else `plain_open()`."""
+        return self.session if self.enabled else plain_open()
+
+    def stop(self) -> None:
+        """Stop the router (after every client is gone) and remove the credentials."""
+        if self.session is not None and not self.session.is_closed():
+            self.session.close()     # the demo closes it, unless the run failed before using it
+        if self.router is not None:
+            self.router.stop()
+        if self.directory is not None:
+            shutil.rmtree(self.directory, ignore_errors=True)
+
+    # ----- the summary -----------------------------------------------------------
+    @property
+    def clean(self) -> bool:
+        return not self.enabled or (self.router is not None and self.router.clean)
+
+    def summary(self, rec) -> dict:
+        """`security` and `rejected_messages` for the demo's JSON (nothing when not secure)."""
+        if not self.enabled:
+            return {}
+        with rec.lock:
+            last = rec.states[-1][1] if rec.states else None
+        return {
+            "rejected_messages": int(last.link.rejected_messages) if last is not None else None,
+            "security": {
+                "router_endpoint": self.endpoint,
+                "authentication": "usrpwd" + (" + mTLS client certificates" if self.endpoint.startswith("tls/") else ""),
+                "access_control": "default deny; per-role rules (services/security/roles.py)",
+                "roles": {"robot": "robot", "controller": "controller", "console": "operator", "demo": "observer"},
+                "router": self.router.report() if self.router is not None else None,
+                "acl_denials_counted": False,
+                "undecodable_at_demo": rec.rejected,
+                "credentials_removed": self.directory is not None and not self.directory.exists(),
+            },
+        }
