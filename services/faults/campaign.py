@@ -14,7 +14,8 @@ Every row is judged on the ground truth (violations, min_margin) and against the
 of docs/safety.md: a violation is *documented* only when the run lost actuation (a controller
 kill or hang, a CAN bus-off, or an estop) at a moment when the stopping-distance forecast
 (stopping.py, on the robot's true plant) says the coasting robot leaves the set; any other
-violation is *unexpected*, and `aggregate(...)["ok"]` is False.
+violation is *unexpected* (likewise a CAN delay whose torque-loop delay the in-process
+forecast puts beyond the measured delay limit), and `aggregate(...)["ok"]` is False.
 """
 from __future__ import annotations
 
@@ -80,6 +81,11 @@ class Case:
                 return value[0], WATCHDOG
         return None
 
+    def loop_delay(self) -> float | None:
+        """s added to the torque loop by a CAN delay (the gateway delays both directions), None if none."""
+        value = self.fault_value("can.delay_ms")
+        return 2.0 * value[0] / 1000.0 if value and value[0] > 0 else None
+
 
 @dataclass
 class RunResult:
@@ -87,6 +93,7 @@ class RunResult:
     exit_code: int | None
     wall_seconds: float
     error: str | None = None
+    summary_file: str | None = None
 
 
 # ----- the matrix ------------------------------------------------------------------------
@@ -102,18 +109,20 @@ def plan(quick: bool = False) -> list[Case]:
     def add(name, cases):
         families.setdefault(name, []).extend(cases)
 
-    if quick:
-        add("none", _cases(A, [()]) + _cases(P, [()]))
-        add("operator", _cases(A, [["operator.delay_ms=300"], ["operator.loss=0.5"], ["operator.burst=0.2,0.2"],
-                                   ["operator.blackout=1.0,5"], ["operator.duplicate=0.5", "operator.reorder=0.3"],
-                                   ["operator.corrupt=0.2"], ["operator.replay=0.3"]], duration=6.0))
-        add("operator-paper", _cases(P, [["operator.delay_ms=1000", "operator.loss=0.5"]]))
-        add("telemetry", _cases(A, [["telemetry.delay_ms=300", "telemetry.loss=0.3"]]))
-        add("can", _cases(A, [["can.loss=0.1"], ["can.delay_ms=5"], ["can.corrupt=0.01"], ["can.busoff=3.5,0.3"]])
-            + _cases(P, [["can.loss=0.2", "can.delay_ms=2"], ["can.babble=2000"]]))
-        add("process", _cases(A, [["controller.kill_at=1.9"], ["controller.kill_at=0.5"],
-                                  ["controller.stop_at=3.5,0.5"], ["console.kill_at=1.0"], ["robot.kill_at=3.0"]])
-            + _cases(P, [["controller.stop_at=2.0,0.05"]]))
+    if quick:   # 20 short runs; several faults share a run where they act on different things
+        q = 4.0
+        add("none", _cases(A, [()], q) + _cases(P, [()], q))
+        add("operator", _cases(A, [["operator.delay_ms=300"], ["operator.loss=0.3", "operator.burst=0.2,0.2"],
+                                   ["operator.duplicate=0.5", "operator.reorder=0.3"],
+                                   ["operator.corrupt=0.2", "operator.replay=0.3"]], q)
+            + _cases(A, [["operator.blackout=0.5,5"]], 5.0)
+            + _cases(P, [["operator.delay_ms=1000", "operator.loss=0.5"]], q))
+        add("telemetry", _cases(A, [["telemetry.delay_ms=300", "telemetry.loss=0.3"]], q))
+        add("can", _cases(A, [["can.loss=0.1"], ["can.delay_ms=5"], ["can.corrupt=0.01"], ["can.busoff=3,0.3"]], q)
+            + _cases(P, [["can.babble=2000"]], q))
+        add("process", _cases(A, [["controller.kill_at=1.9"], ["controller.kill_at=0.5"], ["controller.stop_at=3,0.5"],
+                                  ["console.kill_at=1"], ["robot.kill_at=3"]], q)
+            + _cases(P, [["controller.stop_at=2,0.05"]], q))
         return _interleave(families)
 
     delays = (0, 100, 200, 300, 500, 750, 1000)
@@ -202,10 +211,11 @@ def demo_argv(case: Case, json_out: Path, log_dir: Path | None = None) -> list[s
     return argv
 
 
-def subprocess_runner(workdir: Path, keep_logs: bool = False):
+def subprocess_runner(workdir: Path, keep_logs: bool = False, first_index: int = 0):
     """A runner that starts `sharedctl demo` for a case and reads its JSON; stops it (SIGTERM, then
     SIGKILL — only this process, by PID) if it overruns its duration by RUN_TIMEOUT_MARGIN."""
     def run(case: Case, index: int) -> RunResult:
+        index += first_index
         out = workdir / f"run{index:04d}.json"
         logs = workdir / f"run{index:04d}-logs" if keep_logs else None
         start = time.monotonic()
@@ -230,7 +240,7 @@ def subprocess_runner(workdir: Path, keep_logs: bool = False):
         except (OSError, ValueError) as exc:
             tail = (err or b"").decode(errors="replace").strip().splitlines()[-3:]
             error = error or f"no summary ({type(exc).__name__}): {' / '.join(tail)}"
-        return RunResult(summary, proc.returncode, wall, error)
+        return RunResult(summary, proc.returncode, wall, error, out.name)
     return run
 
 
@@ -261,11 +271,16 @@ def judge(case: Case, result: RunResult, forecasts=None) -> dict:
     violations = int(s.get("violations", 0) or 0)
     estops = int(s.get("estops", 0) or 0)
     loss = case.actuation_loss()
-    forecast = forecasts(case.scenario, case.duration, case.controller, *loss) if (forecasts and loss) else None
+    forecast = forecasts.coast(case.scenario, case.duration, case.controller, *loss) if (forecasts and loss) else None
+    lag = case.loop_delay()
+    delayed = forecasts.delay(case.scenario, case.duration, case.controller, lag) if (forecasts and lag) else None
     first = s.get("first_violation_t")
     estop_first = [t for t in _estop_times(s) if first is not None and t <= first]
+    early = [t for t in _estop_times(s) if t < 0.0]
     if result.summary is None or truth == 0:
         outcome = "error"
+    elif early and not violations:
+        outcome = "not exercised"    # an estop before the run's start: the robot never moved, the fault met no motion
     elif violations:
         outcome = "violation"
     elif estops:
@@ -277,20 +292,23 @@ def judge(case: Case, result: RunResult, forecasts=None) -> dict:
         if forecast is not None and forecast["worst_min_margin"] < 0.0:
             explained = (f"actuation lost at {forecast['approach_speed']:.2f} m/s toward a face "
                          f"{forecast['margin']:.2f} m away: the coasting robot leaves the set (forecast)")
+        elif delayed is not None and delayed["worst_min_margin"] < 0.0:
+            explained = (f"torque loop delayed by {1e3 * lag:.0f} ms or more: beyond the measured delay limit "
+                         f"(in-process margin {delayed['worst_min_margin']:.3f} m)")
         elif estop_first:
             explained = f"estop at {estop_first[0]:.2f} s before the first violation: coasting"
     min_margin = s.get("min_margin")
     return {
-        "id": case.id, "scenario": case.scenario, "controller": case.controller or s.get("controller"),
+        "id": case.id, "scenario": case.scenario, "controller": case.controller, "law": s.get("controller"),
         "faults": list(case.faults), "family": case.family, "duration": case.duration,
         "outcome": outcome, "violations": violations,
         "min_margin": float(min_margin) if isinstance(min_margin, (int, float)) else None,
         "min_margin_t": s.get("min_margin_t"), "first_violation_t": first,
-        "estops": estops, "final_speed": s.get("final_speed"), "truth_samples": truth,
+        "estops": estops, "estop_times": _estop_times(s), "final_speed": s.get("final_speed"), "truth_samples": truth,
         "injected": s.get("injected"), "fault_config": s.get("faults"),
         "failure": s.get("failure"), "demo_ok": s.get("ok"), "exit_code": result.exit_code,
-        "wall_seconds": round(result.wall_seconds, 2), "error": result.error,
-        "forecast": forecast, "explained": explained,
+        "wall_seconds": round(result.wall_seconds, 2), "error": result.error, "summary_file": result.summary_file,
+        "forecast": forecast, "delay_forecast": delayed, "explained": explained,
         "documented": violations == 0 or explained is not None,
     }
 
@@ -298,18 +316,20 @@ def judge(case: Case, result: RunResult, forecasts=None) -> dict:
 def aggregate(rows: list[dict], meta: dict | None = None) -> dict:
     """The campaign's JSON: counts, the worst margin, the families, and every row."""
     margins = [r["min_margin"] for r in rows if r["min_margin"] is not None and math.isfinite(r["min_margin"])
-               and r["outcome"] != "error"]
+               and r["outcome"] not in ("error", "not exercised")]
     families: dict[str, dict] = {}
     for r in rows:
         f = families.setdefault(r["family"], {"runs": 0, "violating_runs": 0, "estop_runs": 0, "errors": 0,
-                                              "min_margin": None})
+                                              "not_exercised": 0, "min_margin": None})
         f["runs"] += 1
         f["violating_runs"] += r["violations"] > 0
         f["estop_runs"] += r["estops"] > 0
         f["errors"] += r["outcome"] == "error"
-        if r["min_margin"] is not None and r["outcome"] != "error":
+        f["not_exercised"] += r["outcome"] == "not exercised"
+        if r["min_margin"] is not None and r["outcome"] not in ("error", "not exercised"):
             f["min_margin"] = r["min_margin"] if f["min_margin"] is None else min(f["min_margin"], r["min_margin"])
     unexpected = [r["id"] for r in rows if not r["documented"]]
+    idle = [r["id"] for r in rows if r["outcome"] == "not exercised"]
     errors = [r["id"] for r in rows if r["outcome"] == "error"]
     return {
         **(meta or {}),
@@ -320,12 +340,30 @@ def aggregate(rows: list[dict], meta: dict | None = None) -> dict:
         "unexpected_violations": unexpected,
         "errors": errors,
         "estop_runs": sum(1 for r in rows if r["estops"]),
+        "not_exercised": idle,
         "min_margin": min(margins) if margins else None,
         "wall_seconds": round(sum(r["wall_seconds"] for r in rows), 1),
         "families": families,
         "ok": not unexpected,
         "rows": rows,
     }
+
+
+def rejudge(rows: list[dict], logs: Path, forecasts=None) -> list[dict]:
+    """Judge again the runs of an earlier campaign from their kept demo summaries (`--keep-logs`)."""
+    out = []
+    for i, row in enumerate(rows):
+        case = Case(row["scenario"], tuple(row["faults"]), row["duration"],
+                    row["controller"] if row["controller"] in ("nce", "of") else None,
+                    int(row["id"].rpartition("#")[2]) - 1 if "#" in row["id"] else 0)
+        path = logs / (row.get("summary_file") or f"run{i:04d}.json")
+        try:
+            summary = json.loads(path.read_text())
+        except (OSError, ValueError):
+            summary = None
+        out.append(judge(case, RunResult(summary, row["exit_code"], row["wall_seconds"], row["error"], path.name),
+                         forecasts))
+    return out
 
 
 def write_json(path: Path, result: dict) -> None:

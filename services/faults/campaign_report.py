@@ -36,9 +36,9 @@ def grid_cells(rows: list[dict], scenario: str = "adversarial_wall") -> dict[tup
     """{(delay_ms, loss): worst min margin} over the runs with only operator delay/loss faults."""
     cells: dict[tuple[float, float], float] = {}
     for r in rows:
-        if r["scenario"] != scenario or r.get("outcome") == "error" or r["min_margin"] is None:
+        if r["scenario"] != scenario or r.get("outcome") in ("error", "not exercised") or r["min_margin"] is None:
             continue
-        if r["controller"] not in (None, "ce") and r["faults"]:
+        if r["controller"] in ("nce", "of"):
             continue
         values = {}
         for spec in r["faults"]:
@@ -76,7 +76,8 @@ def markdown(result: dict, plots: list[str], title: str = "Fault campaign") -> s
                f"{len(result['unexpected_violations'])} unexpected).")
     lines += [f"{result['runs']} runs, {result['wall_seconds']:.0f} s of runs; {verdict} "
               f"Worst ground-truth margin {_fmt(result['min_margin'])} m; {result['estop_runs']} runs with an "
-              f"emergency stop; {len(result['errors'])} runs without a usable measurement.", ""]
+              f"emergency stop, {len(result.get('not_exercised', []))} of them before the run's start (not exercised: the "
+              f"robot never moved); {len(result['errors'])} runs without a usable measurement.", ""]
     if result.get("note"):
         lines += [result["note"], ""]
     lines += ["Each run is `sharedctl demo --scenario S --duration D --fault … --headless --no-reference`, judged on "
@@ -85,11 +86,12 @@ def markdown(result: dict, plots: list[str], title: str = "Fault campaign") -> s
               "the verdicts are in [docs/safety.md](../safety.md).", ""]
     for name in plots:
         lines += [f"![{name}]({name})", ""]
-    lines += ["## By fault family", "", "| family | runs | violating | estop | no data | min margin (m) |",
-              "|---|---:|---:|---:|---:|---:|"]
+    lines += ["## By fault family", "",
+              "| family | runs | violating | estop | not exercised | no data | min margin (m) |",
+              "|---|---:|---:|---:|---:|---:|---:|"]
     for fam, f in sorted(result["families"].items()):
-        lines.append(f"| `{fam}` | {f['runs']} | {f['violating_runs']} | {f['estop_runs']} | {f['errors']} | "
-                     f"{_fmt(f['min_margin'])} |")
+        lines.append(f"| `{fam}` | {f['runs']} | {f['violating_runs']} | {f['estop_runs']} | "
+                     f"{f.get('not_exercised', 0)} | {f['errors']} | {_fmt(f['min_margin'])} |")
     bad = [r for r in rows if r["violations"]]
     lines += ["", "## Violations", ""]
     if not bad:
@@ -105,7 +107,7 @@ def markdown(result: dict, plots: list[str], title: str = "Fault campaign") -> s
               "| # | scenario | faults | outcome | viol. | min margin (m) | estops | forecast margin | injected | wall (s) |",
               "|---:|---|---|---|---:|---:|---:|---:|---|---:|"]
     for i, r in enumerate(rows):
-        law = f" [{r['controller']}]" if r.get("controller") not in (None, "ce", "certainty-equivalent") else ""
+        law = f" [{r['controller']}]" if r.get("controller") in ("nce", "of") else ""
         fc = (r.get("forecast") or {}).get("min_margin")
         lines.append(f"| {i} | {r['scenario']}{law} | {' '.join(f'`{f}`' for f in r['faults']) or '—'} | "
                      f"{r['outcome']} | {r['violations']} | {_fmt(r['min_margin'])} | {r['estops']} | {_fmt(fc)} | "
@@ -157,7 +159,7 @@ def _family_group(family: str) -> str:
 
 
 def _by_family(rows, path: Path) -> Path | None:
-    usable = [r for r in rows if r["min_margin"] is not None and r["outcome"] != "error"]
+    usable = [r for r in rows if r["min_margin"] is not None and r["outcome"] not in ("error", "not exercised")]
     if not usable:
         return None
     plt = _plt()
@@ -180,7 +182,7 @@ def _by_family(rows, path: Path) -> Path | None:
 
 
 def _actuation(rows, path: Path) -> Path | None:
-    pts = [r for r in rows if r.get("forecast") and r["min_margin"] is not None and r["outcome"] != "error"]
+    pts = [r for r in rows if r.get("forecast") and r["min_margin"] is not None and r["outcome"] not in ("error", "not exercised")]
     if not pts:
         return None
     plt = _plt()

@@ -35,6 +35,8 @@ def add_parser(subparsers) -> None:
     c.add_argument("--budget", type=float, metavar="S", help="start no new run after S seconds")
     c.add_argument("--keep-logs", metavar="DIR", help="keep every run's JSON and process logs in DIR")
     c.add_argument("--list", action="store_true", help="print the cases and exit")
+    c.add_argument("--rejudge", metavar="LOGDIR",
+                   help="run nothing: judge the rows of --json OUT again from the summaries kept in LOGDIR")
     p.set_defaults(handler=run)
 
 
@@ -46,8 +48,22 @@ class Forecasts:
 
     def __init__(self) -> None:
         self.loops: dict = {}
+        self.delays: dict = {}
 
-    def __call__(self, scenario: str, duration: float, controller: str | None, t_fault: float, hold: float) -> dict:
+    def delay(self, scenario: str, duration: float, controller: str | None, loop_delay: float) -> dict:
+        """Min margin of the sampled loop with the torque loop delayed by loop_delay (+ up to 2 periods)."""
+        from ..scenario_files import load
+        from . import stopping
+
+        key = (scenario, controller, round(loop_delay, 4), duration)
+        if key not in self.delays:
+            margins = [stopping.delayed_loop_margin(load(scenario), duration, loop_delay + extra, controller)[0]
+                       for extra in (0.0, 2 * stopping.CONTROL_PERIOD)]
+            self.delays[key] = {"loop_delay": loop_delay, "min_margin": round(margins[0], 4),
+                                "worst_min_margin": round(min(margins), 4)}
+        return self.delays[key]
+
+    def coast(self, scenario: str, duration: float, controller: str | None, t_fault: float, hold: float) -> dict:
         from ..scenario_files import load
         from . import stopping
 
@@ -85,6 +101,8 @@ def run(args) -> int:
         print(f"sharedctl faults: skipping {cid}: {reason}", file=sys.stderr)
     cases = [c for c in cases if c.id not in unsupported]
     json_out = Path(args.json) if args.json else None
+    if args.rejudge:
+        return _rejudge(args, json_out)
     kept = []
     if args.resume and json_out is not None and json_out.exists():
         kept = [r for r in json.loads(json_out.read_text())["rows"] if r["outcome"] != "error"]
@@ -96,7 +114,7 @@ def run(args) -> int:
     stop = StopFlag().install()
     workdir = Path(args.keep_logs) if args.keep_logs else Path(tempfile.mkdtemp(prefix="sharedctl-campaign-"))
     workdir.mkdir(parents=True, exist_ok=True)
-    runner = cp.subprocess_runner(workdir, keep_logs=bool(args.keep_logs))
+    runner = cp.subprocess_runner(workdir, keep_logs=bool(args.keep_logs), first_index=_next_index(workdir))
     start = time.monotonic()
     rows = list(kept)
 
@@ -142,6 +160,29 @@ def run(args) -> int:
                   f"({len(result['unexpected_violations'])} unexpected), {len(result['errors'])} without data, "
                   f"min margin {result['min_margin']}")
     return 0 if result["ok"] and not result["errors"] and result["runs"] > 0 else 1
+
+
+def _next_index(workdir: Path) -> int:
+    """The first free runNNNN index in `workdir` (a resumed campaign keeps the earlier summaries)."""
+    used = [int(p.stem[3:7]) for p in workdir.glob("run[0-9][0-9][0-9][0-9].json")]
+    return max(used) + 1 if used else 0
+
+
+def _rejudge(args, json_out: Path | None) -> int:
+    if json_out is None or not json_out.exists():
+        print("sharedctl faults: --rejudge needs --json OUT of an earlier campaign", file=sys.stderr)
+        return 2
+    old = json.loads(json_out.read_text())
+    meta = {k: v for k, v in old.items() if k in ("command", "started", "host", "load_before", "load_after",
+                                                   "skipped", "interrupted", "note")}
+    result = cp.aggregate(cp.rejudge(old["rows"], Path(args.rejudge), Forecasts()), meta)
+    cp.write_json(json_out, result)
+    if args.report:
+        from .campaign_report import write_report
+        write_report(result, Path(args.report), "Fault campaign" + (" (quick)" if "--quick" in meta.get("command", "") else ""))
+    print(f"sharedctl faults: {result['runs']} runs judged again, {result['violating_runs']} with violations "
+          f"({len(result['unexpected_violations'])} unexpected)")
+    return 0 if result["ok"] else 1
 
 
 def _load() -> str:

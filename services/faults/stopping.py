@@ -181,3 +181,32 @@ def forecast(samples, plant: Plant, feasible, t_fault: float, hold: float = WATC
     return CoastOutcome(t_fault=s.t, speed=speed, approach_speed=approach_speed(feasible, s.q, s.qd),
                         margin=feasible.margin(s.q), min_margin=min_margin, travelled=path,
                         predicted_distance=worst_coast_model(plant).stopping_distance(speed, hold), rest_time=rest)
+
+
+def delayed_loop_margin(scenario, duration: float, loop_delay: float, controller: str | None = None,
+                        period: float = CONTROL_PERIOD) -> tuple[float, float]:
+    """(min margin, peak speed) of the scenario's sampled loop on the true plant when the torque loop is
+    delayed by `loop_delay` s in all (CAN feedback age + command transit, rounded to whole periods): the
+    controller computes from the state `loop_delay` old, as a CAN delay of loop_delay/2 each way does."""
+    loop, q0, v0 = scenario.closed_loop(controller)
+    model, human = loop.model, loop.human
+    ctrl = SharedController(model, loop.feasible, loop.controller, loop.sharing, loop.reference)
+    state = ctrl.initial_state(q0, loop.theta_hat0)
+    plant = Plant(model, RobotSimConfig.from_table(scenario.data.get("robot_sim")))
+    ps = plant.initial_state(q0, v0)
+    lag = int(round(loop_delay / period))
+    history = [(ps.q.copy(), ps.qd.copy())] * (lag + 1)
+    min_margin, peak = loop.feasible.margin(ps.q), 0.0
+    for k in range(int(round(duration / period))):
+        t = k * period
+        q, qd = history[0]
+        d = np.clip(human.command(t, q, qd).deflection, -1.0, 1.0)
+        operator = OperatorInput(human.desired(t), human.kp * d, intent(human.kp, d))
+        state, out = ctrl.step(state, q, None if loop.controller.observer else qd, operator, period)
+        tau = np.asarray(model.wheel_torques(q, out.u_s), float)
+        for _ in range(2):
+            ps = plant.step(ps, tau, period / 2)
+            min_margin = min(min_margin, loop.feasible.margin(ps.q))
+        peak = max(peak, float(np.linalg.norm(ps.qd[:2])))
+        history = history[1:] + [(ps.q.copy(), ps.qd.copy())]
+    return min_margin, peak

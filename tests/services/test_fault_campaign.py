@@ -87,8 +87,20 @@ def _summary(violations=0, min_margin=0.03, estop_t=None, first=None):
             "event_log": log, "first_violation_t": first, "injected": {"operator": {"dropped": 7}}}
 
 
-def _forecast(worst):
-    return lambda *_: {"approach_speed": 1.2, "margin": 0.6, "min_margin": worst, "worst_min_margin": worst}
+class _Forecast:
+    def __init__(self, worst, delayed=0.01):
+        self.worst, self.delayed = worst, delayed
+
+    def coast(self, *_):
+        return {"approach_speed": 1.2, "margin": 0.6, "min_margin": self.worst, "worst_min_margin": self.worst,
+                "speed": 1.2}
+
+    def delay(self, *_):
+        return {"min_margin": self.delayed, "worst_min_margin": self.delayed}
+
+
+def _forecast(worst, delayed=0.01):
+    return _Forecast(worst, delayed)
 
 
 def test_a_violation_without_a_loss_of_actuation_is_unexpected():
@@ -103,6 +115,14 @@ def test_a_violation_after_a_kill_at_speed_is_the_documented_limit():
     assert row["documented"] is True and "coasting" in row["explained"]
     safe_forecast = cp.judge(case, cp.RunResult(_summary(40, -0.9, first=2.6), 1, 9.0), _forecast(0.2))
     assert safe_forecast["documented"] is False
+
+
+def test_a_violation_under_can_delay_is_documented_only_beyond_the_measured_delay_limit():
+    case = cp.Case("adversarial_wall", ("can.delay_ms=10",))
+    assert case.loop_delay() == pytest.approx(0.02)
+    result = cp.RunResult(_summary(5, -0.01, first=2.5), 1, 9.0)
+    assert cp.judge(case, result, _forecast(0.3, delayed=-0.002))["documented"] is True
+    assert cp.judge(case, result, _forecast(0.3, delayed=0.01))["documented"] is False
 
 
 def test_a_violation_after_an_estop_is_explained_by_the_estop():
@@ -146,9 +166,7 @@ def test_report_has_the_table_and_the_plots(tmp_path):
             for d in (0, 300) for l in (0, 0.5)]
     kill = cp.Case("adversarial_wall", ("controller.kill_at=2",))
     rows = [cp.judge(c, cp.RunResult(_summary(0, 0.02 + 0.01 * i), 0, 8.0)) for i, c in enumerate(grid)]
-    rows.append(cp.judge(kill, cp.RunResult(_summary(30, -0.8, first=2.7), 1, 8.0),
-                         lambda *_: {"approach_speed": 1.2, "margin": 0.6, "min_margin": -1.1, "worst_min_margin": -1.1,
-                                     "speed": 1.2}))
+    rows.append(cp.judge(kill, cp.RunResult(_summary(30, -0.8, first=2.7), 1, 8.0), _forecast(-1.1)))
     result = cp.aggregate(rows, {"command": "test"})
     cp.write_json(tmp_path / "c.json", result)
     assert json.loads((tmp_path / "c.json").read_text())["runs"] == 5
@@ -189,6 +207,12 @@ def test_speed_limit_inverts_the_stopping_distance(plant, distance):
     model = stopping.worst_coast_model(plant)
     v = model.speed_limit(distance)
     assert 0 < v and model.stopping_distance(v) == pytest.approx(distance, rel=1e-6)
+
+
+def test_torque_loop_delay_erodes_the_margin_until_it_is_violated():
+    scenario = load("adversarial_wall")
+    margins = [stopping.delayed_loop_margin(scenario, 3.0, lag)[0] for lag in (0.0, 0.03)]
+    assert margins[0] > 0.01 and margins[1] < 0.0
 
 
 def test_controller_loss_at_speed_leaves_the_set_and_at_low_speed_does_not():
