@@ -8,6 +8,11 @@ Script mode: the scenario's scripted operator drives; its clock starts when the 
 RobotState arrives (the controller is up), and nothing is sent before that. Keyboard mode:
 the virtual joystick drives (before the first RobotState its wish is around the scenario's
 initial pose). In both modes X/Esc requests an emergency stop and C clears the request.
+
+Control (lease_client.py): the console takes the operator authority lease at start (retrying
+until the controller answers), T takes and R releases it, and commands are sent only while
+this console holds control — an estop request always. The script's clock starts when the
+first RobotState has arrived and control is held.
 """
 from __future__ import annotations
 
@@ -29,12 +34,13 @@ from ..lifecycle import RateClock, StopFlag
 from ..security.zenoh_config import open_configured
 from .dashboard import DashboardView, map_size, render
 from .keyboard import VirtualJoystick, parse_keys
+from .lease_client import LeaseClient
 from .map_view import MapFrame, background
 from .operator import CommandCounter, KeyboardCommandSource, ScriptedCommandSource
 from .terminal import KeyReader
 
 REDRAW_PERIOD = 0.2   # s
-KEYS_SCRIPT = "script drives · x/Esc estop · c clear estop · Ctrl-C quit"
+KEYS_SCRIPT = "script drives · x/Esc estop · c clear estop · t/r take/release · Ctrl-C quit"
 KEYS_KEYBOARD = "arrows/WASD move · q/e yaw · space deadman · x/Esc estop · c clear · t/r take/release · Ctrl-C quit"
 
 
@@ -67,6 +73,7 @@ class Telemetry:
         self.event_count = 0
         self.rejected = 0
         self.trail: deque = deque(maxlen=400)
+        self.lease_listener = None                  # called with (lease_holder, time) of every RobotState
 
     def on_state(self, sample) -> None:
         try:
@@ -83,6 +90,8 @@ class Telemetry:
             self.states += 1
             if not self.trail or np.hypot(state.q[0] - self.trail[-1][0], state.q[1] - self.trail[-1][1]) > 0.02:
                 self.trail.append((state.q[0], state.q[1]))
+        if self.lease_listener is not None:
+            self.lease_listener(state.lease_holder, state.time)
 
     def on_event(self, sample) -> None:
         try:
@@ -105,6 +114,9 @@ class ConsoleApp:
         self.script = ScriptedCommandSource(loop.human, counter) if options.script else None
         self.keyboard = KeyboardCommandSource(VirtualJoystick(deadman_mode=options.deadman_mode), counter)
         self.telemetry = Telemetry()
+        self.lease = LeaseClient(options.robot_id, options.operator_id, counter.session_id)
+        self.telemetry.lease_listener = self.lease.on_state
+        self.script_origin: float | None = None    # monotonic s: the script's t = 0
         self.lock = threading.Lock()          # guards the joystick and `last_command`
         self.last_command: OperatorCommand | None = None
         self.sent = 0
@@ -114,14 +126,19 @@ class ConsoleApp:
     def next_command(self, now: float) -> OperatorCommand | None:
         """The command to send at monotonic time `now` (None: nothing to send yet)."""
         with self.telemetry.lock:
-            state, first = self.telemetry.state, self.telemetry.first_arrival
+            state = self.telemetry.state
+        holding = self.lease.holding
         with self.lock:
+            estop = self.keyboard.joystick.estop
             if self.script is not None:
-                if state is None:
+                if state is None or not (holding or estop):
                     return None
-                return self.script.command(now - first, state, estop=self.keyboard.joystick.estop)
+                if self.script_origin is None:
+                    self.script_origin = now
+                return self.script.command(now - self.script_origin, state, estop=estop)
             pose = self.q0 if state is None else np.asarray(state.q, float)
-            return self.keyboard.command(now, pose)
+            command = self.keyboard.command(now, pose)
+            return command if holding or command.estop else None
 
     def sender(self, publisher, stop: StopFlag) -> None:
         clock = RateClock(1.0 / self.options.rate)
@@ -158,8 +175,10 @@ class ConsoleApp:
             )
         with self.lock:
             view.command = self.last_command
-        if self.script is not None and first is not None:
-            view.script_time = now - first
+            origin = self.script_origin
+        if self.script is not None and origin is not None:
+            view.script_time = now - origin
+        view.control = self.lease.status()
         return view
 
     # ----- the process ------------------------------------------------------
@@ -177,6 +196,8 @@ class ConsoleApp:
             publisher = session.declare_publisher(keys.operator_cmd_key(opts.robot_id))
             sender = threading.Thread(target=self.sender, args=(publisher, stop), name="operator-sender", daemon=True)
             sender.start()
+            leaser = threading.Thread(target=self.lease.run, args=(session, stop), name="operator-lease", daemon=True)
+            leaser.start()
             with KeyReader() if interactive else _NoKeys() as reader:
                 if interactive:
                     live = self._start_live()
@@ -188,8 +209,12 @@ class ConsoleApp:
                         break
                     typed = reader.read()
                     if typed:
+                        pressed = parse_keys(typed)
                         with self.lock:
-                            self.keyboard.joystick.press_all(parse_keys(typed), now)
+                            self.keyboard.joystick.press_all(pressed, now)
+                        for key in pressed:
+                            if key in ("t", "r"):
+                                self.lease.want(key == "t")
                     if live is not None and now >= next_draw:
                         frame, grid, grid_yaw = self._map(live, frame, grid, grid_yaw)
                         live.update(render(self.view(frame, grid)), refresh=True)
@@ -200,6 +225,7 @@ class ConsoleApp:
                     live.stop()
                     live = None
             sender.join(timeout=1.0)
+            leaser.join(timeout=1.0)
             for sub in subscribers:
                 sub.undeclare()
             publisher.undeclare()
@@ -212,7 +238,8 @@ class ConsoleApp:
         last = "none" if tel.state is None else f"seq {tel.state.seq} t={tel.state.time:.2f} s"
         print(f"sharedctl console: {'script' if self.script else 'keyboard'} {opts.robot_id}: "
               f"sent {self.sent} commands in {time.monotonic() - start:.1f} s, received {tel.states} states "
-              f"(last {last}), {tel.event_count} events, {tel.rejected} rejected", file=out, flush=True)
+              f"(last {last}), {tel.event_count} events, {tel.rejected} rejected; control {self.lease.status()}, "
+              f"{self.lease.replies}/{self.lease.queries} lease queries answered", file=out, flush=True)
         return 0
 
     def _start_live(self):

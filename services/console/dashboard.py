@@ -44,6 +44,7 @@ class DashboardView:
     grid: list | None = None                 # map background (map_view.background)
     keys_help: str = ""
     time_origin: float = 0.0                 # s on the controller's clock shown as t = 0 (its first RobotState)
+    control: str = ""                        # this console's lease status (lease_client.py)
 
 
 def bar(value: float, width: int = 20, style: str = "cyan") -> Text:
@@ -115,6 +116,7 @@ def link_panel(view: DashboardView) -> Panel:
         table.add_row("staleness", Text(f"{link.staleness_ms:.0f} ms", style="red" if link.staleness_ms > 300 else ""))
         table.add_row("CAN feedback age", Text(f"{link.can_feedback_age_ms:.1f} ms",
                                                style="red" if link.can_feedback_age_ms > 50 else ""))
+        table.add_row("rejected msgs", Text(str(link.rejected_messages), style="yellow" if link.rejected_messages else ""))
     return Panel(table, title="link")
 
 
@@ -145,6 +147,8 @@ def operator_panel(view: DashboardView) -> Panel:
     table.add_column(style="bold")
     table.add_column()
     table.add_row("mode", view.mode + (f"  t = {view.script_time:.1f} s" if view.script_time is not None else ""))
+    if view.control:
+        table.add_row("control", Text(view.control, style="green" if view.control.startswith("held by this") else "yellow"))
     if cmd is None:
         table.add_row("sent", Text("nothing yet", style="grey50"))
     else:

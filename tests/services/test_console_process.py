@@ -10,7 +10,8 @@ import numpy as np
 import pytest
 
 from sharedctl.protocol import keys
-from sharedctl.protocol.messages import Authority, LinkHealth, OperatorCommand, RobotState, SetClass
+from sharedctl.protocol.messages import (Authority, LeaseReply, LeaseRequest, LinkHealth, OperatorCommand, RobotState,
+                                         SetClass)
 from sharedctl.protocol.msgpack_codec import decode_message, encode_message
 from sharedctl.protocol.wire_types import ROBOT_DIMS
 from sharedctl.services.scenario_files import load
@@ -43,6 +44,15 @@ def console_run():
         keys.operator_cmd_key("robot1"),
         lambda s: received.append((time.monotonic(), decode_message(s.payload.to_bytes(), ROBOT_DIMS, expect=OperatorCommand))))
     pub = session.declare_publisher(keys.state_key("robot1"))
+    lease_requests = []
+
+    def grant(query):                     # the stand-in controller's lease queryable: every take is granted
+        request = decode_message(query.payload.to_bytes(), None, expect=LeaseRequest)
+        lease_requests.append(request)
+        query.reply(keys.lease_key("robot1"), encode_message(LeaseReply(
+            request_seq=request.seq, time=time.time(), granted=True, holder=request.operator_id, reason="granted")))
+
+    queryable = session.declare_queryable(keys.lease_key("robot1"), grant)
     proc = subprocess.Popen(
         [sys.executable, "-m", "sharedctl.services.cli", "console", "--script", "paper_convex", "--headless",
          "--zenoh-connect", endpoint], stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, stderr=subprocess.STDOUT)
@@ -68,13 +78,20 @@ def console_run():
             proc.wait()
         sub.undeclare()
         pub.undeclare()
+        queryable.undeclare()
         session.close()
-    return {"commands": [c for _, c in received], "arrivals": [a for a, _ in received], "exit": proc.returncode,
+    return {"lease_requests": lease_requests, "commands": [c for _, c in received], "arrivals": [a for a, _ in received], "exit": proc.returncode,
             "stop_seconds": stop_seconds, "output": output, "pid": proc.pid}
 
 
 def test_the_console_sends_commands_once_telemetry_arrives(console_run):
     assert len(console_run["commands"]) >= 150
+
+
+def test_the_console_takes_control_before_it_commands(console_run):
+    requests = console_run["lease_requests"]
+    assert requests and requests[0].action.value == "take"
+    assert requests[0].session_id == console_run["commands"][0].session_id
 
 
 def test_the_command_rate_is_50_hz(console_run):

@@ -1,0 +1,114 @@
+"""The console's side of the operator authority lease: take and release control on `…/control/lease`.
+
+`LeaseClient.run` (its own thread) asks the controller's queryable for what the operator wants:
+a take while this console wants control and does not hold it (at start, again after an expiry,
+and on T), a release when it holds control and no longer wants it (R). Each query carries its
+own per-session sequence number and the wall-clock send time (the controller drops replayed,
+out-of-order and stale lease requests). A query nobody answers (the controller is not up yet)
+is retried every `retry` seconds.
+
+RobotState tells the console when it has lost control without asking (the lease expired or
+was released in-band): `on_state` clears `holding` when a state newer than the grant names
+another holder, or none. The console sends commands only while it holds control — and an
+estop always (the controller honours an estop from any operator).
+"""
+from __future__ import annotations
+
+import threading
+import time
+
+from sharedctl.protocol import keys
+from sharedctl.protocol.errors import ProtocolError
+from sharedctl.protocol.messages import LeaseAction, LeaseReply, LeaseRequest
+from sharedctl.protocol.msgpack_codec import decode_message, encode_message
+
+RETRY = 0.25          # s between lease queries while what we want differs from what we have
+QUERY_TIMEOUT = 0.5   # s a query waits for the controller's reply
+
+
+class LeaseClient:
+    """What this console wants (control or not) and what it has, kept in step with the controller."""
+
+    def __init__(self, robot_id: str, operator_id: str, session_id: str, *, want: bool = True,
+                 retry: float = RETRY, timeout: float = QUERY_TIMEOUT) -> None:
+        self.key = keys.lease_key(robot_id)
+        self.operator_id, self.session_id = operator_id, session_id
+        self.retry, self.timeout = retry, timeout
+        self.lock = threading.Lock()
+        self.wants = want
+        self.holding = False
+        self.holder: str | None = None       # as last reported by the controller (reply or RobotState)
+        self.reason = "not asked yet"        # the last reply's reason
+        self.granted_at = 0.0                # controller wall time of the last grant
+        self.seq = 0
+        self.queries = self.replies = 0
+
+    # ----- what the operator wants ------------------------------------------
+    def want(self, control: bool) -> None:
+        with self.lock:
+            self.wants = control
+
+    def on_state(self, holder: str | None, state_time: float) -> None:
+        """A RobotState (controller clock `state_time`) names the current lease holder."""
+        with self.lock:
+            if state_time <= self.granted_at:
+                return                        # sent before our grant: says nothing about it
+            self.holder = holder
+            if self.holding and holder != self.operator_id:
+                self.holding = False
+                self.reason = "lease expired or released"
+
+    def status(self) -> str:
+        """One line for the dashboard."""
+        with self.lock:
+            if self.holding:
+                return "held by this console"
+            who = f"held by {self.holder}" if self.holder else "free"
+            return f"{who} ({self.reason})"
+
+    # ----- the thread -------------------------------------------------------
+    def run(self, session, stop) -> None:
+        while not stop.stopped:
+            with self.lock:
+                action = (LeaseAction.TAKE if self.wants and not self.holding
+                          else LeaseAction.RELEASE if self.holding and not self.wants else None)
+            if action is not None:
+                self.ask(session, action)
+            stop.wait(self.retry)
+
+    def ask(self, session, action: LeaseAction) -> LeaseReply | None:
+        """One query; updates `holding` from the reply. None if nobody answered."""
+        with self.lock:
+            self.seq += 1
+            request = LeaseRequest(operator_id=self.operator_id, session_id=self.session_id, seq=self.seq,
+                                   time=time.time(), action=action)
+        self.queries += 1
+        reply = None
+        try:
+            for answer in session.get(self.key, payload=encode_message(request), timeout=self.timeout):
+                if answer.ok is None:
+                    continue
+                try:
+                    candidate = decode_message(answer.ok.payload.to_bytes(), None, expect=LeaseReply)
+                except ProtocolError:
+                    continue
+                if candidate.request_seq == request.seq:
+                    reply = candidate
+        except Exception as exc:  # noqa: BLE001 — a failed query is retried, never fatal
+            with self.lock:
+                self.reason = f"query failed: {type(exc).__name__}"
+            return None
+        if reply is None:
+            with self.lock:
+                self.reason = "no answer from the controller"
+            return None
+        self.replies += 1
+        with self.lock:
+            self.holder, self.reason = reply.holder, reply.reason
+            if action is LeaseAction.TAKE:
+                self.holding = reply.granted
+                if reply.granted:
+                    self.granted_at = reply.time
+            elif reply.granted:
+                self.holding = False
+        return reply
