@@ -50,6 +50,7 @@ FLUSH_PERIOD = 0.25          # s between chunk flushes: the most a SIGKILL can l
 MAX_QUEUED = 200_000         # samples waiting for the writer; beyond this they are counted as dropped
 CHUNK_SIZE = 1 << 20         # bytes; chunks are closed by time long before they reach this
 _STOP = object()
+_FLUSH = object()
 _U64 = 1 << 64
 
 
@@ -116,6 +117,11 @@ class McapRecorder:
         except queue.Full:
             self.counts.dropped += 1
 
+    def flush(self) -> None:
+        """Close the chunk in progress after what is queued now (the writer also does so every flush period)."""
+        if not self._closed:
+            self._queue.put(_FLUSH)
+
     def on_sample(self, sample) -> None:
         """Zenoh subscriber callback."""
         self.put(str(sample.key_expr), sample.payload.to_bytes(), time.time_ns(), zenoh_time_ns(sample.timestamp))
@@ -140,7 +146,9 @@ class McapRecorder:
                 item = None
             if item is _STOP:
                 break
-            if item is not None:
+            if item is _FLUSH:
+                next_flush = 0.0
+            elif item is not None:
                 self._write(*item)
                 dirty = True
             if time.monotonic() >= next_flush:
@@ -153,7 +161,7 @@ class McapRecorder:
                 item = self._queue.get_nowait()
             except queue.Empty:
                 break
-            if item is not _STOP:
+            if item is not _STOP and item is not _FLUSH:
                 self._write(*item)
         self._finish()
 
