@@ -1,0 +1,195 @@
+"""`sharedctl bench [--quick] [--json OUT]`: the performance figures of docs/performance.md, in one run.
+
+    control_step_us.{ce,nce,of}.{median,p99}          SharedController.step (control_step.py)
+    loop.{rate_hz,deadline_misses,jitter_p99_us}       500 Hz over CAN with the simulated robot (stack_run.py)
+    loop_1khz.{…}                                      the same at 1 kHz
+    latency.{sensor_to_torque_us,operator_to_torque_us,zenoh_floor_us,can_floor_us}.{p50,p99}
+    batched_sim.{robots,steps_per_s,scalar_steps_per_s,speedup_vs_scalar}   (batched.py)
+    bus_load.fraction_1mbit                            frames seen on the bus, worst-case stuffing
+    cpu.fraction_of_one_core                           robot + controller at 500 Hz
+    machine.{cpu,cores,kernel,python,loadavg_before,loadavg_after}
+
+--quick: 15 s at 500 Hz, 8 s at 1 kHz, shorter step trajectories (under 3 minutes); the full run:
+60 s and 20 s, plus the step's breakdown, floors, profile and scaling with the number of groups.
+Targets are reported, never enforced: timing depends on the machine and its load.
+"""
+from __future__ import annotations
+
+import importlib
+import json
+import math
+import os
+import platform
+import time
+from pathlib import Path
+
+from . import control_step, stack_run
+
+TARGETS = {
+    "control_step_us.ce.median": ("≤", 50.0),
+    "loop.deadline_misses": ("≤", 0),
+    "loop.jitter_p99_us": ("≤", 300.0),
+    "latency.sensor_to_torque_us.p99": ("≤", 1000.0),
+    "batched_sim.steps_per_s": ("≥", 1_000_000),
+    "batched_sim.speedup_vs_scalar": ("≥", 50.0),
+    "bus_load.fraction_1mbit": ("≤", 0.5),
+}
+
+
+def add_parser(subparsers) -> None:
+    p = subparsers.add_parser("bench", help="measure step cost, loop timing, latency, bus load, CPU and the batched simulator")
+    p.add_argument("--quick", action="store_true", help="shorter runs (under 3 minutes)")
+    p.add_argument("--json", metavar="OUT", help="write the figures as JSON to OUT")
+    p.add_argument("--skip-stack", action="store_true", help="no processes: only the step and the batched simulator")
+    p.set_defaults(handler=run)
+
+
+def machine() -> dict:
+    cpu = platform.processor() or ""
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                cpu = line.split(":", 1)[1].strip()
+                break
+    except OSError:
+        pass
+    return {"cpu": cpu, "cores": os.cpu_count(), "kernel": platform.release(), "python": platform.python_version(),
+            "numpy": _version("numpy"), "loadavg_before": _loadavg()}
+
+
+def _version(name: str) -> str:
+    try:
+        return importlib.import_module(name).__version__
+    except Exception:  # noqa: BLE001
+        return "?"
+
+
+def _loadavg() -> list[float] | None:
+    try:
+        return [float(x) for x in Path("/proc/loadavg").read_text().split()[:3]]
+    except OSError:
+        return None
+
+
+def batched(quick: bool) -> dict:
+    try:
+        module = importlib.import_module("sharedctl.services.bench.batched")
+    except ImportError as exc:
+        return {"robots": None, "steps_per_s": None, "scalar_steps_per_s": None, "speedup_vs_scalar": None,
+                "reason": f"the batched simulator's benchmark is not available: {exc}"}
+    try:
+        return module.measure_batched(quick)
+    except Exception as exc:  # noqa: BLE001 — one failed section must not lose the others
+        return {"robots": None, "steps_per_s": None, "scalar_steps_per_s": None, "speedup_vs_scalar": None,
+                "reason": f"measure_batched failed: {type(exc).__name__}: {exc}"}
+
+
+def collect(quick: bool, skip_stack: bool = False, progress=print) -> dict:
+    report: dict = {"quick": quick, "machine": machine(), "started": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())}
+    progress("control step …")
+    report["control_step_us"] = control_step.measure(quick)
+    if not quick:
+        progress("step breakdown, floors, profile, scaling …")
+        report["control_step_detail"] = {
+            "breakdown_us": control_step.breakdown(), "floors_ns": control_step.floors(),
+            "profile": control_step.profile_summary(), "scaling_groups": control_step.scaling(),
+        }
+    if not skip_stack:
+        seconds, seconds_1k = (15.0, 8.0) if quick else (60.0, 20.0)
+        progress(f"stack at 500 Hz for {seconds:g} s …")
+        run500 = stack_run.run(500.0, seconds)
+        progress(f"stack at 1 kHz for {seconds_1k:g} s …")
+        run1k = stack_run.run(1000.0, seconds_1k, probes=False)
+        report["loop"] = run500["loop"]
+        report["latency"] = run500["latency"]
+        report["bus_load"] = run500["bus_load"]
+        report["cpu"] = run500["cpu"]
+        report["loop_1khz"] = dict(run1k["loop"], sensor_to_torque_us=run1k["latency"]["sensor_to_torque_us"],
+                                   bus_load=run1k["bus_load"], cpu=run1k["cpu"])
+        report["stack"] = {"500hz": {k: run500[k] for k in ("processes", "robot_priority", "log_dir")},
+                           "1khz": {k: run1k[k] for k in ("processes", "robot_priority", "log_dir")}}
+    progress("batched simulator …")
+    report["batched_sim"] = batched(quick)
+    report["machine"]["loadavg_after"] = _loadavg()
+    report["targets"] = check_targets(report)
+    return report
+
+
+def lookup(report: dict, dotted: str):
+    node = report
+    for part in dotted.split("."):
+        if not isinstance(node, dict) or part not in node:
+            return None
+        node = node[part]
+    return node
+
+
+def check_targets(report: dict) -> dict:
+    out = {}
+    for key, (op, bound) in TARGETS.items():
+        value = lookup(report, key)
+        ok = None
+        if isinstance(value, (int, float)) and math.isfinite(value):
+            ok = value <= bound if op == "≤" else value >= bound
+        out[key] = {"value": value, "target": f"{op} {bound:g}", "met": ok}
+    return out
+
+
+def table(report: dict):
+    from rich.table import Table
+
+    t = Table(title=f"sharedctl bench{' --quick' if report['quick'] else ''} · load {report['machine'].get('loadavg_before')} → "
+                    f"{report['machine'].get('loadavg_after')}")
+    t.add_column("figure")
+    t.add_column("value", justify="right")
+    t.add_column("target")
+    t.add_column("met")
+
+    def fmt(v):
+        if v is None:
+            return "—"
+        if isinstance(v, float):
+            return f"{v:,.3g}" if abs(v) < 10 else f"{v:,.0f}"
+        return str(v)
+
+    rows = [f"control_step_us.{law}.{s}" for law in control_step.LAWS for s in ("median", "p99")]
+    rows += ["loop.rate_hz", "loop.deadline_misses", "loop.jitter_p99_us", "loop_1khz.rate_hz",
+             "loop_1khz.deadline_misses", "loop_1khz.jitter_p99_us"]
+    rows += [f"latency.{k}.{s}" for k in ("sensor_to_torque_us", "operator_to_torque_us", "zenoh_floor_us", "can_floor_us")
+             for s in ("p50", "p99")]
+    rows += ["batched_sim.robots", "batched_sim.steps_per_s", "batched_sim.scalar_steps_per_s",
+             "batched_sim.speedup_vs_scalar", "bus_load.fraction_1mbit", "cpu.fraction_of_one_core"]
+    targets = report.get("targets", {})
+    for key in rows:
+        target = targets.get(key, {})
+        met = target.get("met")
+        t.add_row(key, fmt(lookup(report, key)), target.get("target", ""),
+                  "" if key not in targets else ("[green]yes" if met else "[red]no" if met is False else "—"))
+    return t
+
+
+def run(args) -> int:
+    from rich.console import Console
+
+    console = Console(stderr=False)
+    report = collect(args.quick, args.skip_stack, progress=lambda text: console.print(f"[dim]{text}"))
+    console.print(table(report))
+    reason = lookup(report, "batched_sim.reason")
+    if reason:
+        console.print(f"[yellow]batched_sim: {reason}")
+    if args.json:
+        Path(args.json).parent.mkdir(parents=True, exist_ok=True)
+        Path(args.json).write_text(json.dumps(finite_or_null(report), indent=2, default=str, allow_nan=False) + "\n")
+        console.print(f"[dim]wrote {args.json}")
+    return 0
+
+
+def finite_or_null(value):
+    """The report with NaN/inf (a figure that could not be measured) as null, so the JSON is strict."""
+    if isinstance(value, dict):
+        return {k: finite_or_null(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [finite_or_null(v) for v in value]
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    return value

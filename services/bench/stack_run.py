@@ -1,0 +1,319 @@
+"""The running stack, measured from outside: robot + controller processes on a host-local CAN bus.
+
+One run: `sharedctl robot` and `sharedctl controller --rate R` (paper_convex, udp_multicast on a
+private port, Zenoh on private loopback ports) as child processes; this process listens on the
+same bus (udp_multicast delivers every frame to every listener, kernel-stamped on arrival) and
+plays the operator over Zenoh. In the same run, two probe processes (hop_probe.py) send bare
+timestamps over Zenoh and over a second udp_multicast port: the transport floors.
+
+* loop: torque bursts (three Set_Input_Torque frames per tick) on the bus → rate, period jitter
+  |Δt − T| and periods without a burst; the daemon's own summary line (missed/late ticks, wake-up
+  lateness, compute time) is parsed too.
+* sensor → torque: for each burst, the age of the wheel estimates the tick used: the oldest of
+  the three axes' newest Get_Encoder_Estimates that arrived before the burst minus the daemon's
+  median compute time (a frame arriving during the computation was not used).
+* operator → torque: the operator's y deflection alternates sign every command; the latency of a
+  command is from its send time to the first torque burst whose sign follows it.
+* bus load: every frame seen on the bus in the window, worst-case stuffed (bus_load.py).
+* CPU: utime + stime of both processes from /proc/<pid>/stat over the window.
+"""
+from __future__ import annotations
+
+import os
+import re
+import struct
+import sys
+import tempfile
+import threading
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from sharedctl.protocol import keys
+from sharedctl.protocol.messages import ControlRequest, OperatorCommand
+from sharedctl.protocol.msgpack_codec import encode_message
+from sharedctl.protocol.odrive_enums import CommandId
+
+from .. import can_bus, children, zenoh_session
+from .bus_load import bus_load
+from .hop_probe import PROBE_CAN_ID, PROBE_KEY, unpack_time
+from .statistics import group_bursts, missed_periods, percentiles, period_jitter
+
+ROBOT_ID = "robot1"
+SCENARIO = "paper_convex"
+OPERATOR_RATE = 100.0      # Hz, commands (each flips the deflection's sign)
+DEFLECTION = 0.2           # normalised y deflection: u_h = ±k_p·0.2 = ±4 N, the robot stays put
+PROBE_RATE = 500.0         # Hz, each transport probe
+SETTLE = 2.5               # s after start before the window opens (arming, Zenoh links)
+
+SUMMARY = re.compile(
+    r"(?P<ticks>\d+) ticks at (?P<rate>[\d.]+) Hz, (?P<missed>\d+) missed / (?P<late>\d+) late deadlines, "
+    r"jitter p50 (?P<j50>[\d.]+) ms p99 (?P<j99>[\d.]+) ms max (?P<jmax>[\d.]+) ms, "
+    r"compute p50 (?P<c50>[\d.]+) ms p99 (?P<c99>[\d.]+) ms, CPU (?P<cpu>\d+)%"
+)
+
+
+@dataclass
+class Frame:
+    t: float            # kernel receive time (wall clock, s)
+    can_id: int
+    dlc: int
+    remote: bool
+    extended: bool
+    data: bytes
+
+
+@dataclass
+class Listener:
+    """A thread draining one bus into a list (stops with `stop`)."""
+
+    bus: object
+    frames: list = field(default_factory=list)
+    app_times: list = field(default_factory=list)
+    stop: threading.Event = field(default_factory=threading.Event)
+
+    def start(self) -> threading.Thread:
+        thread = threading.Thread(target=self._run, daemon=True)
+        thread.start()
+        return thread
+
+    def _run(self) -> None:
+        while not self.stop.is_set():
+            try:
+                msg = self.bus.recv(timeout=0.1)
+            except Exception:  # noqa: BLE001 — a bad datagram is skipped, the listener goes on
+                continue
+            if msg is None:
+                continue
+            now = time.time()
+            self.frames.append(Frame(msg.timestamp or now, msg.arbitration_id, msg.dlc, msg.is_remote_frame,
+                                     msg.is_extended_id, bytes(msg.data)))
+            self.app_times.append(now)
+
+
+def _cpu_seconds(pid: int) -> float | None:
+    try:
+        fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+        return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+    except (OSError, IndexError, ValueError):
+        return None
+
+
+def _command(counter: int, session_id: str, sign: float) -> OperatorCommand:
+    q0 = (-0.9, 3.0, 0.0)
+    return OperatorCommand(
+        operator_id="bench", session_id=session_id, seq=counter, send_time=time.time(),
+        joystick=(0.0, sign * DEFLECTION, 0.0), q_d=q0, qd_d=(0.0, 0.0, 0.0), qdd_d=(0.0, 0.0, 0.0),
+        deadman=True, estop=False, control_request=ControlRequest.NONE,
+    )
+
+
+def run(rate_hz: float, seconds: float, log_dir: Path | None = None, probes: bool = True) -> dict:
+    """Start the stack at `rate_hz` for `seconds` of measurement; returns the figures (see module doc)."""
+    log_dir = Path(log_dir or tempfile.mkdtemp(prefix="sharedctl-bench-"))
+    can_port, probe_port = children.free_udp_port(), children.free_udp_port()
+    z_robot, z_ctrl, z_bench = (f"tcp/127.0.0.1:{zenoh_session.free_loopback_port()}" for _ in range(3))
+    can_args = ["--can-interface", "udp_multicast", "--can-option", f"port={can_port}"]
+    total = SETTLE + seconds + 0.5
+    started = []
+    bus = probe_bus = session = None
+    listener = probe_listener = None
+    zenoh_arrivals: list[tuple[float, float]] = []
+    operator_log: list[tuple[float, float]] = []
+    try:
+        bus = can_bus.open_bus(can_bus.resolve("udp_multicast", None, {"port": can_port}))
+        probe_bus = can_bus.open_bus(can_bus.resolve("udp_multicast", None, {"port": probe_port}))
+        listener, probe_listener = Listener(bus), Listener(probe_bus)
+        listener.start()
+        probe_listener.start()
+        robot = children.start_child("robot", ["robot", "--scenario", SCENARIO, *can_args, "--zenoh-listen", z_robot,
+                                               "--robot-id", ROBOT_ID, "--duration", f"{total + 1.0:.1f}"], log_dir)
+        started.append(robot)
+        robot_priority = children.raise_priority(robot.popen.pid)
+        controller = children.start_child("controller", [
+            "controller", "--scenario", SCENARIO, *can_args, "--zenoh-listen", z_ctrl, "--robot-id", ROBOT_ID,
+            "--rate", f"{rate_hz:g}", "--duration", f"{total:.1f}", "--quiet"], log_dir)
+        started.append(controller)
+        for child, endpoint in ((robot, z_robot), (controller, z_ctrl)):
+            if not children.wait_listening(endpoint, child, 20.0):
+                raise RuntimeError(f"{child.name} did not start (log: {child.log})")
+        robot_priority = _realtime(robot.popen.pid) or robot_priority
+        session = zenoh_session.open_session([z_bench], [z_ctrl])
+        publisher = session.declare_publisher(keys.operator_cmd_key(ROBOT_ID))
+        subscriber = session.declare_subscriber(
+            PROBE_KEY, lambda sample: zenoh_arrivals.append((time.time(), unpack_time(sample.payload.to_bytes()))))
+        if probes:
+            started.append(_start_probe("zenoh_probe", ["zenoh", z_bench, f"{total:.1f}", f"{PROBE_RATE:g}"], log_dir))
+            started.append(_start_probe("can_probe", ["can", str(probe_port), f"{total:.1f}", f"{PROBE_RATE:g}"], log_dir))
+
+        session_id = os.urandom(8).hex()
+        t0 = time.monotonic()
+        window = (time.time() + SETTLE, time.time() + SETTLE + seconds)
+        cpu_start = cpu_end = None
+        seq, sign = 0, 1.0
+        next_cmd = time.monotonic()
+        while time.monotonic() - t0 < SETTLE + seconds:
+            if cpu_start is None and time.time() >= window[0]:
+                cpu_start = (time.monotonic(), {c.name: _cpu_seconds(c.popen.pid) for c in (robot, controller)})
+            seq += 1
+            sign = -sign
+            cmd = _command(seq, session_id, sign)
+            publisher.put(encode_message(cmd))
+            operator_log.append((cmd.send_time, sign))
+            next_cmd += 1.0 / OPERATOR_RATE
+            time.sleep(max(next_cmd - time.monotonic(), 0.0))
+        cpu_end = (time.monotonic(), {c.name: _cpu_seconds(c.popen.pid) for c in (robot, controller)})
+        for child in started:
+            try:
+                child.popen.wait(timeout=5.0)
+            except Exception:  # noqa: BLE001 — stopped below
+                pass
+        subscriber.undeclare()
+        publisher.undeclare()
+    finally:
+        for child in started:
+            child.stop()
+        for lst in (listener, probe_listener):
+            if lst is not None:
+                lst.stop.set()
+        time.sleep(0.15)
+        if session is not None:
+            session.close()
+        for b in (bus, probe_bus):
+            if b is not None:
+                b.shutdown()
+    summary = _daemon_summary(controller)
+    figures = analyse(listener.frames, operator_log, window, rate_hz, summary)
+    figures["cpu"] = _cpu(cpu_start, cpu_end)
+    figures["latency"]["zenoh_floor_us"] = percentiles(
+        [arrived - sent for arrived, sent in zenoh_arrivals if window[0] <= sent <= window[1]], 1e6)
+    probe = [f for f in probe_listener.frames if f.can_id == PROBE_CAN_ID and f.dlc == 8]
+    figures["latency"]["can_floor_us"] = percentiles(
+        [f.t - unpack_time(f.data) for f in probe if window[0] <= f.t <= window[1]], 1e6)
+    figures["processes"] = {c.name: c.report() for c in started}
+    figures["robot_priority"] = robot_priority
+    figures["log_dir"] = str(log_dir)
+    return figures
+
+
+def _realtime(pid: int) -> str | None:
+    """SCHED_FIFO 10 for the robot's loop thread (its main thread, once its other threads exist): the
+    simulated drives stand for microcontrollers that a loaded host must not starve. None if not permitted."""
+    try:
+        os.sched_setscheduler(pid, os.SCHED_FIFO, os.sched_param(10))
+        return "SCHED_FIFO 10 (loop thread)"
+    except (OSError, AttributeError):
+        return None
+
+
+def _start_probe(name: str, argv: list[str], log_dir: Path) -> children.Child:
+    import subprocess
+
+    log = log_dir / f"{name}.log"
+    with open(log, "wb") as out:
+        popen = subprocess.Popen([sys.executable, "-m", "sharedctl.services.bench.hop_probe", *argv],
+                                 stdin=subprocess.DEVNULL, stdout=out, stderr=subprocess.STDOUT, start_new_session=True)
+    return children.Child(name, popen, log)
+
+
+def _daemon_summary(controller: children.Child) -> dict:
+    match = SUMMARY.search(controller.tail(40))
+    if not match:
+        return {}
+    g = match.groupdict()
+    return {"ticks": int(g["ticks"]), "rate_hz": float(g["rate"]), "missed": int(g["missed"]), "late": int(g["late"]),
+            "lateness_p50_us": float(g["j50"]) * 1e3, "lateness_p99_us": float(g["j99"]) * 1e3,
+            "lateness_max_us": float(g["jmax"]) * 1e3, "compute_p50_us": float(g["c50"]) * 1e3,
+            "compute_p99_us": float(g["c99"]) * 1e3, "cpu_percent": int(g["cpu"])}
+
+
+def _cpu(start, end) -> dict:
+    if start is None or end is None:
+        return {"fraction_of_one_core": None}
+    wall = end[0] - start[0]
+    per = {name: (end[1][name] - start[1][name]) / wall
+           for name in end[1] if end[1][name] is not None and start[1].get(name) is not None}
+    return {"fraction_of_one_core": sum(per.values()) if per else None, "per_process": per, "window_s": wall}
+
+
+def analyse(frames: list[Frame], operator_log, window, rate_hz: float, summary: dict) -> dict:
+    """The loop, latency and bus-load figures from the frames seen on the bus in `window`."""
+    lo, hi = window
+    period = 1.0 / rate_hz
+    inside = [f for f in frames if lo <= f.t <= hi]
+    torque = [f for f in inside if not f.remote and (f.can_id & 0x1F) == CommandId.SET_INPUT_TORQUE]
+    encoder = [f for f in inside if not f.remote and (f.can_id & 0x1F) == CommandId.GET_ENCODER_ESTIMATES]
+    bursts = group_bursts([f.t for f in torque], 0.25 * period)
+    burst_set = set(bursts)
+    first_frames = [f for f in torque if f.t in burst_set]
+    jitter = period_jitter(bursts, period)
+    missed_bus = missed_periods(bursts, period)
+    loop = {
+        "rate_hz": (len(bursts) - 1) / (bursts[-1] - bursts[0]) if len(bursts) > 1 else 0.0,
+        "deadline_misses": (summary["missed"] + summary["late"]) if summary else missed_bus,
+        "jitter_p99_us": percentiles(jitter, 1e6)["p99"],
+        "jitter_p50_us": percentiles(jitter, 1e6)["p50"],
+        "periods_without_torque_on_bus": missed_bus,
+        "bursts": len(bursts),
+        "daemon": summary,
+    }
+    compute = summary.get("compute_p50_us", 0.0) * 1e-6 if summary else 0.0
+    loop["sensor_age_excludes_compute_us"] = compute * 1e6
+    sensor = _sensor_ages(bursts, encoder, compute)
+    operator = _operator_latencies(first_frames, torque, operator_log, period)
+    seconds = hi - lo
+    load = bus_load([(f.dlc, f.remote, f.extended) for f in inside if f.can_id != PROBE_CAN_ID], seconds)
+    counts = {"torque": len(torque), "encoder": len(encoder), "all": len(inside)}
+    return {
+        "loop": loop,
+        "latency": {"sensor_to_torque_us": percentiles(sensor, 1e6), "operator_to_torque_us": percentiles(operator, 1e6)},
+        "bus_load": {"fraction_1mbit": load, "frames_per_s": {k: v / seconds for k, v in counts.items()}},
+    }
+
+
+def _sensor_ages(bursts: list[float], encoder: list[Frame], compute: float) -> list[float]:
+    """For each burst: burst time − the oldest of the axes' newest estimates that arrived before the tick used them."""
+    by_node: dict[int, list[float]] = {}
+    for f in encoder:
+        by_node.setdefault(f.can_id >> 5, []).append(f.t)
+    series = [np.asarray(v) for v in by_node.values()]
+    ages = []
+    for tb in bursts:
+        cutoff = tb - compute
+        newest = []
+        for times in series:
+            k = int(np.searchsorted(times, cutoff)) - 1
+            if k < 0:
+                break
+            newest.append(times[k])
+        if len(newest) == len(series) and series:
+            ages.append(tb - min(newest))
+    return ages
+
+
+def _operator_latencies(first_frames: list[Frame], torque: list[Frame], operator_log, period: float) -> list[float]:
+    """Send time of each command → the first torque burst after it whose wheel-0 torque has the command's sign
+    (the sign convention learnt from the run: the majority of sign(τ₀)·sign(command) over the bursts)."""
+    wheel0 = [(f.t, struct.unpack("<f", f.data[:4])[0]) for f in torque if (f.can_id >> 5) == (torque[0].can_id >> 5)] if torque else []
+    if not wheel0 or not operator_log:
+        return []
+    times = np.array([t for t, _ in wheel0])
+    signs = np.sign([tau for _, tau in wheel0])
+    sent = np.array([t for t, _ in operator_log])
+    wanted = np.array([s for _, s in operator_log])
+    # which command was current at each burst (the last one sent before it), for the sign convention
+    current = np.searchsorted(sent, times) - 1
+    valid = (current >= 0) & (signs != 0)
+    if not np.any(valid):
+        return []
+    convention = 1.0 if np.sum(signs[valid] * wanted[current[valid]]) >= 0 else -1.0
+    out = []
+    for k in range(len(sent) - 1):
+        lo, hi = np.searchsorted(times, sent[k]), np.searchsorted(times, sent[k + 1])
+        for j in range(lo, hi):
+            if signs[j] * convention == wanted[k]:
+                out.append(times[j] - sent[k])
+                break
+    return out

@@ -1,0 +1,91 @@
+"""The pure parts of `sharedctl bench`: bus-load arithmetic, statistics, and the analysis of a bus capture."""
+from __future__ import annotations
+
+import math
+import struct
+
+import numpy as np
+import pytest
+
+from sharedctl.protocol.odrive_enums import CommandId
+from sharedctl.services.bench.bus_load import bus_load, frame_bits
+from sharedctl.services.bench.command import check_targets, finite_or_null
+from sharedctl.services.bench.stack_run import Frame, analyse
+from sharedctl.services.bench.statistics import group_bursts, missed_periods, percentiles, period_jitter
+
+
+def test_worst_case_frame_lengths_with_bit_stuffing():
+    assert frame_bits(8) == 135        # 34 + 64 + 13 + ⌊97/4⌋
+    assert frame_bits(4) == 95
+    assert frame_bits(0) == 55
+
+
+def test_a_remote_frame_has_no_data_field_whatever_its_dlc():
+    assert frame_bits(8, is_remote=True) == frame_bits(0)
+
+
+def test_extended_identifiers_cost_more():
+    assert frame_bits(8, is_extended=True) == 160
+
+
+def test_dlc_outside_classic_can_is_refused():
+    with pytest.raises(ValueError):
+        frame_bits(9)
+
+
+def test_bus_load_of_the_default_rates():
+    # 3 axes × 500 Hz encoder estimates (8 bytes) + 3 × 500 Hz torque commands (4 bytes) + 3 × 10 Hz heartbeats (8 bytes)
+    frames = [(8, False, False)] * 1500 + [(4, False, False)] * 1500 + [(8, False, False)] * 30
+    assert bus_load(frames, 1.0) == pytest.approx((1530 * 135 + 1500 * 95) / 1e6)
+    assert bus_load(frames, 2.0) == pytest.approx(bus_load(frames, 1.0) / 2)
+
+
+def test_percentiles_and_empty_samples():
+    stats = percentiles(np.arange(1, 101), scale=2.0)
+    assert stats["p50"] == pytest.approx(101.0) and stats["p99"] == pytest.approx(198.02) and stats["n"] == 100
+    assert math.isnan(percentiles([])["p99"])
+
+
+def test_missed_periods_counts_the_periods_without_an_event():
+    assert missed_periods([0.0, 0.002, 0.006, 0.008, 0.014], 0.002) == 3
+    assert missed_periods([0.0, 0.0021, 0.0039], 0.002) == 0
+
+
+def test_period_jitter_is_the_deviation_from_the_period():
+    np.testing.assert_allclose(period_jitter([0.0, 0.0021, 0.0039], 0.002), [1e-4, 2e-4], atol=1e-12)
+
+
+def test_bursts_start_at_the_first_frame_after_a_gap():
+    assert group_bursts([0.0, 1e-5, 2e-5, 2e-3, 2.01e-3], 5e-4) == [0.0, 2e-3]
+
+
+def _frame(t, node, cmd, data=b"\0" * 8):
+    return Frame(t, node << 5 | cmd, len(data), False, False, data)
+
+
+def test_analyse_a_synthetic_capture():
+    period = 0.002
+    frames = []
+    for k in range(500):
+        tick = 0.001 + k * period
+        for node in range(3):
+            frames.append(_frame(tick - 0.0007, node, CommandId.GET_ENCODER_ESTIMATES))            # 0.7 ms before the tick
+            sign = 1.0 if (tick // 0.01) % 2 == 0 else -1.0                                    # operator flips every 10 ms
+            frames.append(_frame(tick + 0.0001 + 1e-5 * node, node, CommandId.SET_INPUT_TORQUE, struct.pack("<ff", sign, 0.0)[:4]))
+    operator = [(j * 0.01 - 0.003, 1.0 if j % 2 == 0 else -1.0) for j in range(1, 100)]   # 3 ms before the flip; next burst 1.1 ms after it
+    figures = analyse(frames, operator, (0.0, 1.0), 500.0, {})
+    assert figures["loop"]["rate_hz"] == pytest.approx(500.0)
+    assert figures["loop"]["deadline_misses"] == 0
+    assert figures["loop"]["jitter_p99_us"] == pytest.approx(0.0, abs=1e-3)
+    assert figures["latency"]["sensor_to_torque_us"]["p50"] == pytest.approx(800.0, abs=1e-3)
+    assert figures["latency"]["operator_to_torque_us"]["p50"] == pytest.approx(3000.0 + 1100.0, abs=1.0)
+    assert figures["bus_load"]["fraction_1mbit"] == pytest.approx((1500 * 135 + 1500 * 95) / 1e6, rel=1e-3)
+
+
+def test_targets_are_judged_and_unmeasured_figures_become_null():
+    report = {"control_step_us": {"ce": {"median": 40.0}}, "bus_load": {"fraction_1mbit": 0.7}, "loop": {"jitter_p99_us": math.nan}}
+    targets = check_targets(report)
+    assert targets["control_step_us.ce.median"]["met"] is True
+    assert targets["bus_load.fraction_1mbit"]["met"] is False
+    assert targets["loop.jitter_p99_us"]["met"] is None
+    assert finite_or_null({"a": [math.inf, 1.0]}) == {"a": [None, 1.0]}
