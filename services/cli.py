@@ -18,6 +18,7 @@ COMMANDS = (
     "sharedctl.services.controller.command",
     "sharedctl.services.console.command",
     "sharedctl.services.demo_command",
+    "sharedctl.services.bench.command",
     "sharedctl.services.compare_command",
     "sharedctl.services.faults.command",
     "sharedctl.services.security.router_command",
