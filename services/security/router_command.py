@@ -81,3 +81,18 @@ def run(args) -> int:
         session.close()
     print(f"{PROG}: stopped after {time.monotonic() - start:.1f} s", flush=True)
     return 0
+
+
+def main(argv: list[str] | None = None) -> int:
+    """`python -m sharedctl.services.security.router_command --config FILE`: the router alone, without
+    importing every other sub-command (what a systemd unit or a container runs)."""
+    import argparse
+
+    parser = argparse.ArgumentParser(prog=PROG)
+    add_parser(parser.add_subparsers(dest="command", required=True))
+    args = parser.parse_args(["router", *(sys.argv[1:] if argv is None else argv)])
+    return args.handler(args)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

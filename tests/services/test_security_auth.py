@@ -6,25 +6,29 @@ services/security/zenoh_config.py) with usrpwd, default-deny ACL and, in the mTL
 from __future__ import annotations
 
 import json
+import os
 import signal
 import subprocess
 import sys
 import threading
 import time
+from pathlib import Path
 
 import pytest
 import zenoh
 
 from sharedctl.protocol import keys
 from sharedctl.services.security import credentials
-from sharedctl.services.security.zenoh_config import client_config, router_config, write_config
+from sharedctl.services.security.zenoh_config import client_config, from_file, router_config
 from sharedctl.services.zenoh_session import free_loopback_port
 
 from .processes import reap, wait_for
 
 pytestmark = pytest.mark.processes
 
-REFUSE_TIMEOUT_MS = 1500     # how long a refused client keeps trying before zenoh.open raises
+REFUSE_TIMEOUT_MS = 1000     # how long a refused client keeps trying before zenoh.open raises
+CONNECT_TIMEOUT_MS = 8000    # a client that should get in (generous: the host is shared)
+DEPLOY = Path(__file__).resolve().parents[2] / "deploy"
 ROBOT = "robot1"
 
 
@@ -34,7 +38,7 @@ def _open(cfg: dict) -> zenoh.Session:
 
 def _client(role, creds, endpoint, **changes) -> dict:
     cfg = client_config(role, creds, [endpoint])
-    cfg["connect"]["timeout_ms"] = REFUSE_TIMEOUT_MS
+    cfg["connect"]["timeout_ms"] = CONNECT_TIMEOUT_MS
     for path, value in changes.items():       # "transport/auth/usrpwd/password" -> value (None deletes)
         *parents, leaf = path.split("/")
         node = cfg
@@ -48,6 +52,7 @@ def _client(role, creds, endpoint, **changes) -> dict:
 
 
 def _refused(cfg: dict) -> bool:
+    cfg["connect"]["timeout_ms"] = REFUSE_TIMEOUT_MS
     try:
         session = _open(cfg)
     except zenoh.ZError:
@@ -194,20 +199,38 @@ def test_acl_under_mtls_matches_the_certificate_common_name(creds, tls_router):
     assert (got_operator, got_observer) == (10, 0)
 
 
-# ----- the router command -------------------------------------------------------
-def test_router_command_enforces_its_config_file_and_stops_on_sigterm(creds, tmp_path):
-    endpoint = f"tcp/127.0.0.1:{free_loopback_port()}"
-    config = write_config(tmp_path / "router.json5", router_config(creds, [endpoint]), "test router")
-    proc = subprocess.Popen([sys.executable, "-m", "sharedctl.services.cli", "router", "--config", str(config),
-                             "--duration", "60"], stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+# ----- the router command and the site script -------------------------------------------
+def test_make_credentials_writes_a_site_that_sharedctl_router_enforces(tmp_path):
+    """deploy/make-credentials.sh -> DIR/router.json5 runs as `sharedctl router --config`; DIR/operator.json5
+    (paths relative to the file) gets in; the same without its certificate and password does not."""
+    endpoint = f"tls/127.0.0.1:{free_loopback_port()}"
+    site = tmp_path / "site"
+    env = dict(os.environ, SHAREDCTL_ROUTER_ENDPOINT=endpoint,
+               PATH=f"{Path(sys.executable).parent}{os.pathsep}{os.environ.get('PATH', '')}")
+    made = subprocess.run(["sh", str(DEPLOY / "make-credentials.sh"), str(site), "--days", "2"], env=env,
+                          capture_output=True, text=True, timeout=60)
+    assert made.returncode == 0, made.stderr
+    assert sorted(p.name for p in site.glob("*.json5")) == ["controller.json5", "observer.json5", "operator.json5",
+                                                          "robot.json5", "router.json5"]
+    # the router module alone (`sharedctl router` runs the same `run`, after importing every sub-command)
+    proc = subprocess.Popen([sys.executable, "-m", "sharedctl.services.security.router_command", "--config",
+                             str(site / "router.json5"), "--duration", "60"],
+                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     try:
         banner = proc.stdout.readline()
-        assert "usrpwd on" in banner and "ACL on" in banner, banner
-        session = _open(_client("observer", creds, endpoint))
+        assert "usrpwd on" in banner and "mTLS on" in banner and "ACL on" in banner, banner
+        session = zenoh.open(from_file(site / "operator.json5"))
+        assert len(session.info.routers_zid()) == 1
         session.close()
-        assert _refused(_client("observer", creds, endpoint, **{"transport/auth": None}))
+        anonymous = {"mode": "client", "connect": {"endpoints": [endpoint]},
+                     "scouting": {"multicast": {"enabled": False}, "gossip": {"enabled": False}},
+                     "transport": {"link": {"tls": {"root_ca_certificate": str(site / "ca.pem")}}}}
+        assert _refused(anonymous)
         proc.send_signal(signal.SIGTERM)
         assert proc.wait(timeout=5) == 0
     finally:
         reap([proc])
         proc.stdout.close()
+
+
+# ----- the router command -------------------------------------------------------
