@@ -80,6 +80,8 @@ class CbfSafetyFilter(Strategy):
 
     def select_region(self, current: int | None, q, v) -> int:
         """The switching rule for unions (see the module docstring)."""
+        if len(self.feasible.regions) == 1:
+            return 0
         margins = self.feasible.region_margins(q)
         if current is None:
             return int(np.argmax(margins))
