@@ -1,5 +1,5 @@
-"""`sharedctl demo --fault …`: an operator fault, a CAN fault and a controller kill wired into a
-real run; the JSON shows what was injected, and the run is judged as services/faults/stack.py says
+"""`sharedctl demo --fault …`: an operator fault and a controller kill wired into a real run
+(the CAN gateway has its own test: with it, this run adds a fourth busy process to the host); the JSON shows what was injected, and the run is judged as services/faults/stack.py says
 (0 ground-truth violations, every process not killed on purpose exits cleanly)."""
 import json
 import subprocess
@@ -10,7 +10,7 @@ import pytest
 
 pytestmark = pytest.mark.processes
 
-FAULTS = ["operator.loss=0.3", "operator.delay_ms=200", "can.loss=0.02", "controller.kill_at=2"]
+FAULTS = ["operator.loss=0.3", "operator.delay_ms=200", "controller.kill_at=2"]
 
 
 def test_demo_with_faults_reports_what_was_injected(tmp_path):
@@ -30,8 +30,7 @@ def test_demo_with_faults_reports_what_was_injected(tmp_path):
     assert operator["received"] > 50 and abs(operator["measured_drop_rate"] - 0.3) < 0.15
     assert operator["latency_ms_mean"] >= 200
     assert injected["relay"]["telemetry"]["stages"] == [] and injected["relay"]["exit_code"] == 0
-    can = injected["gateway"]
-    assert can["command"]["received"] > 1000 and can["command"]["lost"] > 0 and can["feedback"]["lost"] > 0
+    assert "gateway" not in injected          # no can.* fault: controller and robot share one bus
     kill, = injected["processes"]
     assert kill["action"] == "kill" and 2.0 <= kill["done_at"] < 3.0
     assert injected["killed"][0]["exit_code"] == -9
