@@ -81,6 +81,11 @@ class Case:
                 return value[0], WATCHDOG
         return None
 
+    def short_hang(self) -> tuple[float, float] | None:
+        """(START, DURATION) of a controller hang too short to trip the watchdog (a transient loop delay)."""
+        value = self.fault_value("controller.stop_at")
+        return (value[0], value[1]) if value and value[1] <= WATCHDOG else None
+
     def loop_delay(self) -> float | None:
         """s added to the torque loop by a CAN delay (the gateway delays both directions), None if none."""
         value = self.fault_value("can.delay_ms")
@@ -94,6 +99,41 @@ class RunResult:
     wall_seconds: float
     error: str | None = None
     summary_file: str | None = None
+    log_dir: Path | None = None      # the run's process logs, if kept
+
+
+_FIGURES = (("robot", r"physics steps (\d+)", "robot_physics_steps"), ("robot", r"missed ticks (\d+)", "robot_missed_ticks"),
+            ("robot", r"skipped ([\d.]+) s", "robot_skipped_s"),
+            ("controller", r"(\d+) missed / \d+ late deadlines", "controller_missed_deadlines"),
+            ("controller", r"jitter p50 [\d.]+ ms p99 [\d.]+ ms max ([\d.]+) ms", "controller_jitter_max_ms"),
+            ("controller", r"; estops (\d+), torque-limited", "controller_estops"))
+
+
+OVERLOAD_MISSED_FRACTION = 0.5   # the robot's loop missed more than half its physics ticks
+
+
+def overloaded(host: dict | None) -> bool:
+    """The run's robot simulator could not keep real time (see docs/safety.md §3)."""
+    if not host or not host.get("robot_physics_steps"):
+        return False
+    return host.get("robot_missed_ticks", 0) / host["robot_physics_steps"] > OVERLOAD_MISSED_FRACTION
+
+
+def host_figures(log_dir: Path | None) -> dict | None:
+    """How far the robot's and the controller's real-time loops fell behind (their exit lines), if logged."""
+    import re
+    if log_dir is None or not log_dir.is_dir():
+        return None
+    out = {}
+    for name, pattern, key in _FIGURES:
+        try:
+            text = (log_dir / f"{name}.log").read_text(errors="replace")
+        except OSError:
+            continue
+        found = re.findall(pattern, text)
+        if found:
+            out[key] = float(found[-1])
+    return out or None
 
 
 # ----- the matrix ------------------------------------------------------------------------
@@ -211,13 +251,13 @@ def demo_argv(case: Case, json_out: Path, log_dir: Path | None = None) -> list[s
     return argv
 
 
-def subprocess_runner(workdir: Path, keep_logs: bool = False, first_index: int = 0):
+def subprocess_runner(workdir: Path, first_index: int = 0):
     """A runner that starts `sharedctl demo` for a case and reads its JSON; stops it (SIGTERM, then
     SIGKILL — only this process, by PID) if it overruns its duration by RUN_TIMEOUT_MARGIN."""
     def run(case: Case, index: int) -> RunResult:
         index += first_index
         out = workdir / f"run{index:04d}.json"
-        logs = workdir / f"run{index:04d}-logs" if keep_logs else None
+        logs = workdir / f"run{index:04d}-logs"     # read by host_figures; the workdir goes unless kept
         start = time.monotonic()
         env = dict(os.environ, PYTHONUNBUFFERED="1")
         proc = subprocess.Popen(demo_argv(case, out, logs), stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
@@ -240,7 +280,7 @@ def subprocess_runner(workdir: Path, keep_logs: bool = False, first_index: int =
         except (OSError, ValueError) as exc:
             tail = (err or b"").decode(errors="replace").strip().splitlines()[-3:]
             error = error or f"no summary ({type(exc).__name__}): {' / '.join(tail)}"
-        return RunResult(summary, proc.returncode, wall, error, out.name)
+        return RunResult(summary, proc.returncode, wall, error, out.name, logs)
     return run
 
 
@@ -272,11 +312,16 @@ def judge(case: Case, result: RunResult, forecasts=None) -> dict:
     estops = int(s.get("estops", 0) or 0)
     loss = case.actuation_loss()
     forecast = forecasts.coast(case.scenario, case.duration, case.controller, *loss) if (forecasts and loss) else None
-    lag = case.loop_delay()
-    delayed = forecasts.delay(case.scenario, case.duration, case.controller, lag) if (forecasts and lag) else None
+    lag, hang = case.loop_delay(), case.short_hang()
+    delayed = None
+    if forecasts and (lag or hang):
+        delayed = forecasts.delay(case.scenario, case.duration, case.controller, lag or 0.0, hang)
     first = s.get("first_violation_t")
     estop_first = [t for t in _estop_times(s) if first is not None and t <= first]
-    early = [t for t in _estop_times(s) if t < 0.0]
+    host = host_figures(result.log_dir)
+    # an estop the demo's observer did not see (before it connected) still shows in the controller's count
+    estops = max(estops, int((host or {}).get("controller_estops", 0)))
+    early = [t for t in _estop_times(s) if t < 0.0] or (estops and not _estop_times(s))
     if result.summary is None or truth == 0:
         outcome = "error"
     elif early and not violations:
@@ -293,10 +338,15 @@ def judge(case: Case, result: RunResult, forecasts=None) -> dict:
             explained = (f"actuation lost at {forecast['approach_speed']:.2f} m/s toward a face "
                          f"{forecast['margin']:.2f} m away: the coasting robot leaves the set (forecast)")
         elif delayed is not None and delayed["worst_min_margin"] < 0.0:
-            explained = (f"torque loop delayed by {1e3 * lag:.0f} ms or more: beyond the measured delay limit "
-                         f"(in-process margin {delayed['worst_min_margin']:.3f} m)")
+            what = (f"torque loop delayed by {1e3 * lag:.0f} ms or more" if lag else
+                    f"controller hung {1e3 * hang[1]:.0f} ms at {hang[0]:g} s (torque held)")
+            explained = f"{what}: beyond the measured delay limit (in-process margin {delayed['worst_min_margin']:.3f} m)"
         elif estop_first:
             explained = f"estop at {estop_first[0]:.2f} s before the first violation: coasting"
+        elif overloaded(host):
+            explained = (f"host overloaded: the robot's real-time loop missed {host['robot_missed_ticks']:.0f} of "
+                         f"{host['robot_physics_steps']:.0f} ticks (stalls caught up with the torque held: a torque-loop "
+                         f"delay beyond the limit of docs/safety.md §3)")
     min_margin = s.get("min_margin")
     return {
         "id": case.id, "scenario": case.scenario, "controller": case.controller, "law": s.get("controller"),
@@ -308,6 +358,7 @@ def judge(case: Case, result: RunResult, forecasts=None) -> dict:
         "injected": s.get("injected"), "fault_config": s.get("faults"),
         "failure": s.get("failure"), "demo_ok": s.get("ok"), "exit_code": result.exit_code,
         "wall_seconds": round(result.wall_seconds, 2), "error": result.error, "summary_file": result.summary_file,
+        "host": host,
         "forecast": forecast, "delay_forecast": delayed, "explained": explained,
         "documented": violations == 0 or explained is not None,
     }
@@ -329,6 +380,7 @@ def aggregate(rows: list[dict], meta: dict | None = None) -> dict:
         if r["min_margin"] is not None and r["outcome"] not in ("error", "not exercised"):
             f["min_margin"] = r["min_margin"] if f["min_margin"] is None else min(f["min_margin"], r["min_margin"])
     unexpected = [r["id"] for r in rows if not r["documented"]]
+    overload = [r["id"] for r in rows if r["violations"] and (r["explained"] or "").startswith("host overloaded")]
     idle = [r["id"] for r in rows if r["outcome"] == "not exercised"]
     errors = [r["id"] for r in rows if r["outcome"] == "error"]
     return {
@@ -338,6 +390,8 @@ def aggregate(rows: list[dict], meta: dict | None = None) -> dict:
         "violating_runs": sum(1 for r in rows if r["violations"]),
         "documented_violating_runs": sum(1 for r in rows if r["violations"] and r["documented"]),
         "unexpected_violations": unexpected,
+        "overload_violations": overload,
+        "overloaded_runs": sum(1 for r in rows if overloaded(r.get("host"))),
         "errors": errors,
         "estop_runs": sum(1 for r in rows if r["estops"]),
         "not_exercised": idle,
@@ -361,8 +415,8 @@ def rejudge(rows: list[dict], logs: Path, forecasts=None) -> list[dict]:
             summary = json.loads(path.read_text())
         except (OSError, ValueError):
             summary = None
-        out.append(judge(case, RunResult(summary, row["exit_code"], row["wall_seconds"], row["error"], path.name),
-                         forecasts))
+        out.append(judge(case, RunResult(summary, row["exit_code"], row["wall_seconds"], row["error"], path.name,
+                                         logs / f"{path.stem}-logs"), forecasts))
     return out
 
 

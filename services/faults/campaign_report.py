@@ -32,6 +32,12 @@ def _injected(row: dict, width: int = 70) -> str:
     return (text[: width - 1] + "…") if len(text) > width else text
 
 
+def _missed(row: dict) -> str:
+    host = row.get("host") or {}
+    steps = host.get("robot_physics_steps")
+    return f"{100 * host.get('robot_missed_ticks', 0) / steps:.0f} %" if steps else "–"
+
+
 def grid_cells(rows: list[dict], scenario: str = "adversarial_wall") -> dict[tuple[float, float], float]:
     """{(delay_ms, loss): worst min margin} over the runs with only operator delay/loss faults."""
     cells: dict[tuple[float, float], float] = {}
@@ -78,6 +84,10 @@ def markdown(result: dict, plots: list[str], title: str = "Fault campaign") -> s
               f"Worst ground-truth margin {_fmt(result['min_margin'])} m; {result['estop_runs']} runs with an "
               f"emergency stop, {len(result.get('not_exercised', []))} of them before the run's start (not exercised: the "
               f"robot never moved); {len(result['errors'])} runs without a usable measurement.", ""]
+    if result.get("overloaded_runs"):
+        lines += [f"The host could not keep real time in {result['overloaded_runs']} runs (the robot simulator's loop "
+                  f"missed more than half of its physics ticks; `host` in each row); "
+                  f"{len(result.get('overload_violations', []))} violations happened in such runs.", ""]
     if result.get("note"):
         lines += [result["note"], ""]
     lines += ["Each run is `sharedctl demo --scenario S --duration D --fault … --headless --no-reference`, judged on "
@@ -97,21 +107,23 @@ def markdown(result: dict, plots: list[str], title: str = "Fault campaign") -> s
     if not bad:
         lines += ["None.", ""]
     for r in bad:
-        fc = r.get("forecast") or {}
+        fc = r.get("forecast") or r.get("delay_forecast") or {}
         lines.append(f"* `{r['id']}`: {r['violations']} samples outside, first at {_fmt(r['first_violation_t'], 2)} s, "
                      f"min margin {_fmt(r['min_margin'])} m; "
                      + (f"forecast: speed {_fmt(fc.get('speed'), 2)} m/s at the fault, margin {_fmt(fc.get('margin'))} m, "
-                        f"coasting to {_fmt(fc.get('min_margin'))} m; " if fc else "")
+                        f"coasting to {_fmt(fc.get('min_margin'))} m; " if "speed" in fc else
+                        f"in-process forecast {_fmt(fc.get('worst_min_margin'))} m; " if fc else "")
                      + (r["explained"] or "**not explained by the documented limits**"))
     lines += ["", "## Every run", "",
-              "| # | scenario | faults | outcome | viol. | min margin (m) | estops | forecast margin | injected | wall (s) |",
-              "|---:|---|---|---|---:|---:|---:|---:|---|---:|"]
+              "| # | scenario | faults | outcome | viol. | min margin (m) | estops | forecast margin | robot ticks missed "
+              "| injected | wall (s) |",
+              "|---:|---|---|---|---:|---:|---:|---:|---:|---|---:|"]
     for i, r in enumerate(rows):
         law = f" [{r['controller']}]" if r.get("controller") in ("nce", "of") else ""
         fc = (r.get("forecast") or {}).get("min_margin")
         lines.append(f"| {i} | {r['scenario']}{law} | {' '.join(f'`{f}`' for f in r['faults']) or '—'} | "
                      f"{r['outcome']} | {r['violations']} | {_fmt(r['min_margin'])} | {r['estops']} | {_fmt(fc)} | "
-                     f"{_injected(r)} | {_fmt(r['wall_seconds'], 1)} |")
+                     f"{_missed(r)} | {_injected(r)} | {_fmt(r['wall_seconds'], 1)} |")
     lines.append("")
     return "\n".join(lines)
 

@@ -50,16 +50,21 @@ class Forecasts:
         self.loops: dict = {}
         self.delays: dict = {}
 
-    def delay(self, scenario: str, duration: float, controller: str | None, loop_delay: float) -> dict:
-        """Min margin of the sampled loop with the torque loop delayed by loop_delay (+ up to 2 periods)."""
+    def delay(self, scenario: str, duration: float, controller: str | None, loop_delay: float, hang=None) -> dict:
+        """Min margin of the sampled loop with the torque loop delayed by loop_delay (+ up to 2 periods), or
+        with the controller hung over `hang` = (START, DURATION) (the worst start within ±WINDOW)."""
         from ..scenario_files import load
         from . import stopping
 
-        key = (scenario, controller, round(loop_delay, 4), duration)
+        key = (scenario, controller, round(loop_delay, 4), duration, hang)
         if key not in self.delays:
-            margins = [stopping.delayed_loop_margin(load(scenario), duration, loop_delay + extra, controller)[0]
-                       for extra in (0.0, 2 * stopping.CONTROL_PERIOD)]
-            self.delays[key] = {"loop_delay": loop_delay, "min_margin": round(margins[0], 4),
+            if hang is None:
+                runs = [(loop_delay + extra, None) for extra in (0.0, 2 * stopping.CONTROL_PERIOD)]
+            else:
+                runs = [(loop_delay, (hang[0] + dt, hang[1])) for dt in (0.0, -self.WINDOW, self.WINDOW)]
+            margins = [stopping.delayed_loop_margin(load(scenario), duration, lag, controller, hang=h)[0]
+                       for lag, h in runs]
+            self.delays[key] = {"loop_delay": loop_delay, "hang": hang, "min_margin": round(margins[0], 4),
                                 "worst_min_margin": round(min(margins), 4)}
         return self.delays[key]
 
@@ -114,7 +119,7 @@ def run(args) -> int:
     stop = StopFlag().install()
     workdir = Path(args.keep_logs) if args.keep_logs else Path(tempfile.mkdtemp(prefix="sharedctl-campaign-"))
     workdir.mkdir(parents=True, exist_ok=True)
-    runner = cp.subprocess_runner(workdir, keep_logs=bool(args.keep_logs), first_index=_next_index(workdir))
+    runner = cp.subprocess_runner(workdir, first_index=_next_index(workdir))
     start = time.monotonic()
     rows = list(kept)
 

@@ -184,10 +184,12 @@ def forecast(samples, plant: Plant, feasible, t_fault: float, hold: float = WATC
 
 
 def delayed_loop_margin(scenario, duration: float, loop_delay: float, controller: str | None = None,
-                        period: float = CONTROL_PERIOD) -> tuple[float, float]:
+                        period: float = CONTROL_PERIOD, hang: tuple[float, float] | None = None) -> tuple[float, float]:
     """(min margin, peak speed) of the scenario's sampled loop on the true plant when the torque loop is
     delayed by `loop_delay` s in all (CAN feedback age + command transit, rounded to whole periods): the
-    controller computes from the state `loop_delay` old, as a CAN delay of loop_delay/2 each way does."""
+    controller computes from the state `loop_delay` old, as a CAN delay of loop_delay/2 each way does.
+    `hang` = (START, DURATION): the controller does not run in that window (SIGSTOP shorter than the
+    drives' watchdog) and the drives hold its last torque; it then resumes on fresh feedback."""
     loop, q0, v0 = scenario.closed_loop(controller)
     model, human = loop.model, loop.human
     ctrl = SharedController(model, loop.feasible, loop.controller, loop.sharing, loop.reference)
@@ -200,10 +202,12 @@ def delayed_loop_margin(scenario, duration: float, loop_delay: float, controller
     for k in range(int(round(duration / period))):
         t = k * period
         q, qd = history[0]
-        d = np.clip(human.command(t, q, qd).deflection, -1.0, 1.0)
-        operator = OperatorInput(human.desired(t), human.kp * d, intent(human.kp, d))
-        state, out = ctrl.step(state, q, None if loop.controller.observer else qd, operator, period)
-        tau = np.asarray(model.wheel_torques(q, out.u_s), float)
+        hung = hang is not None and hang[0] <= t < hang[0] + hang[1]
+        if not hung or k == 0:
+            d = np.clip(human.command(t, q, qd).deflection, -1.0, 1.0)
+            operator = OperatorInput(human.desired(t), human.kp * d, intent(human.kp, d))
+            state, out = ctrl.step(state, q, None if loop.controller.observer else qd, operator, period)
+            tau = np.asarray(model.wheel_torques(q, out.u_s), float)
         for _ in range(2):
             ps = plant.step(ps, tau, period / 2)
             min_margin = min(min_margin, loop.feasible.margin(ps.q))
