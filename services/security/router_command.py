@@ -79,7 +79,9 @@ def run(args) -> int:
             stop.wait(0.2)
     finally:
         session.close()
-    print(f"{PROG}: stopped after {time.monotonic() - start:.1f} s", flush=True)
+    wall = time.monotonic() - start
+    cpu = time.process_time()
+    print(f"{PROG}: stopped after {wall:.1f} s; cpu {cpu:.2f} s ({100 * cpu / max(wall, 1e-9):.0f}% of one core)", flush=True)
     return 0
 
 

@@ -45,7 +45,10 @@ def check_endpoint(endpoint: str) -> str:
     if not isinstance(endpoint, str):
         raise EndpointError(f"{endpoint!r}: an endpoint is a string")
     if endpoint.startswith("tls/"):
-        check_loopback("tcp/" + endpoint[4:])
+        try:
+            check_loopback("tcp/" + endpoint[4:])
+        except EndpointError as exc:
+            raise EndpointError(str(exc).replace("tcp/", "tls/", 1)) from None
         return endpoint
     return check_loopback(endpoint)
 
