@@ -26,6 +26,10 @@ touch only the data (a frame whose corruption passed the CRC, i.e. a faulty node
 sends a flood of ID (default 0x000, the highest priority) on both buses; udp_multicast has no
 arbitration, so what the flood costs there is receive load on every node.
 
+``buffer_wait_ms`` (mean/max) is how long frames sat in the receive buffer before the gateway
+read them (the interface's kernel timestamp to the read), ``latency_ms`` the time from the read
+to the send: together, the delay the gateway itself adds beyond the injected one.
+
 One thread: `select` on both buses' sockets, drain each ready bus in a batch (non-blocking
 recv until empty, at most BATCH frames), release what is due from a heap, babble when due.
 As `sharedctl fault-relay`, faults act from SIGUSR1 on (``--arm-on-signal``), counters go to
@@ -92,9 +96,14 @@ class Stream:
         self.latency_sum = 0.0
         self.latency_max = 0.0
         self.latency_n = 0
+        self.wait_sum = 0.0       # s frames waited in the receive buffer (kernel timestamp → read)
+        self.wait_max = 0.0
 
     def report(self) -> dict:
-        return {**self.pipe.counters, "stages": self.pipe.describe(), "frames_seen": self.received,
+        n = self.received
+        return {**self.pipe.counters,
+                "buffer_wait_ms_mean": 1000.0 * self.wait_sum / n if n else None,
+                "buffer_wait_ms_max": 1000.0 * self.wait_max if n else None, "stages": self.pipe.describe(), "frames_seen": self.received,
                 "passed_unimpaired": self.unimpaired, "forwarded": self.forwarded, "send_errors": self.send_errors,
                 "latency_ms_mean": 1000.0 * self.latency_sum / self.latency_n if self.latency_n else None,
                 "latency_ms_max": 1000.0 * self.latency_max if self.latency_n else None}
@@ -170,6 +179,10 @@ class CanGateway:
         stream = self.streams[kind]
         stream.received += 1
         now = time.monotonic()
+        if msg.timestamp:
+            wait = time.time() - msg.timestamp
+            stream.wait_sum += wait
+            stream.wait_max = max(stream.wait_max, wait)
         target = self.buses["robot" if kind == "command" else "controller"]
         if self.t0 is None or not selected(self.link.ids, kind, msg.arbitration_id):
             stream.unimpaired += 1
