@@ -64,7 +64,8 @@ def write_report(result: dict, out_dir: Path, title: str = "Fault campaign") -> 
     rows = result["rows"]
     files = [p for p in (_heatmap(rows, out_dir / "margin_heatmap.png"),
                          _by_family(rows, out_dir / "margin_by_family.png"),
-                         _actuation(rows, out_dir / "actuation_loss.png")) if p is not None]
+                         _actuation(rows, out_dir / "actuation_loss.png"),
+                         _stopping(out_dir / "stopping_distance.png")) if p is not None]
     md = out_dir / "README.md"
     md.write_text(markdown(result, [p.name for p in files], title))
     return [md, *files]
@@ -208,6 +209,35 @@ def _actuation(rows, path: Path) -> Path | None:
     ax.set_xlabel("speed toward the nearest face when actuation is lost (m/s, forecast)")
     ax.set_ylabel("min margin (m; clipped at −1.5)")
     ax.set_title("controller kill / hang, CAN bus-off: measured (o) vs forecast (x)")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+def _stopping(path: Path) -> Path:
+    """D(v) of docs/safety.md §2 for the default robot, with the bands b0, b1, b2."""
+    import numpy as np
+
+    from sharedctl.models import OmniRobot
+
+    from ..robot.plant import Plant, RobotSimConfig
+    from .stopping import worst_coast_model
+    plt = _plt()
+    plant = Plant(OmniRobot(), RobotSimConfig())
+    model = worst_coast_model(plant)
+    push = 20.0 / float(plant.model.theta[0])
+    v = np.linspace(0.0, 1.5, 151)
+    fig, ax = plt.subplots(figsize=(7.5, 4.5))
+    ax.plot(v, [model.stopping_distance(x) for x in v], label="D(v): last torque 0, watchdog 0.1 s, coasting")
+    ax.plot(v, [model.stopping_distance(x, 0.1, push) for x in v], label="D(v): operator's 20 N push held 0.1 s")
+    for d, name in ((0.025, "b0"), (0.3, "b1"), (0.6, "b2")):
+        ax.axhline(d, color="grey", lw=0.8, ls=":")
+        ax.text(0.01, d, f" {name} = {d:g} m", va="bottom", fontsize=8, color="grey")
+    ax.set_xlabel("speed toward the face when the drives stop driving (m/s)")
+    ax.set_ylabel("distance to rest (m)")
+    ax.set_title("stopping distance of the unpowered robot (wheel friction only)")
+    ax.legend(fontsize=8)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)

@@ -173,7 +173,8 @@ def test_report_has_the_table_and_the_plots(tmp_path):
     assert grid_cells(rows) == {(0.0, 0.0): 0.02, (0.0, 0.5): 0.03, (300.0, 0.0): 0.04, (300.0, 0.5): 0.05}
     files = write_report(result, tmp_path / "report")
     names = {f.name for f in files}
-    assert {"README.md", "margin_heatmap.png", "margin_by_family.png", "actuation_loss.png"} <= names
+    assert {"README.md", "margin_heatmap.png", "margin_by_family.png", "actuation_loss.png",
+            "stopping_distance.png"} <= names
     text = (tmp_path / "report" / "README.md").read_text()
     assert "1 of 5 runs left the admissible set" in text and "`controller.kill_at=2`" in text
     assert text.count("\n| ") >= 5 + 3
