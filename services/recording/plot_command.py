@@ -21,11 +21,13 @@ import sys
 import tomllib
 from pathlib import Path
 
+import matplotlib
 import numpy as np
+from matplotlib.figure import Figure
 
 from sharedctl.scenario import ScenarioError, parse
 
-from .. import figures
+from .. import figures   # sets the Agg backend; the panels are shared with sharedctl sim --plot
 from ..scenario_files import load
 from .recorded_run import LINK_FIELDS, RecordedRun, load_run
 
@@ -54,14 +56,14 @@ def _loop(run: RecordedRun, scenario_arg: str | None):
     return parse(tomllib.loads(run.scenario_toml)).closed_loop()[0]
 
 
-def _save(fig, out: Path, name: str, written: list[Path]) -> None:
+def _save(fig, out: Path, name: str, written: list[Path], dpi: int = DPI) -> None:
     path = out / name
-    fig.savefig(path, dpi=DPI)
+    fig.savefig(path, dpi=dpi)
     written.append(path)
 
 
 def _single(panel, trace, loop, title: str, size=(11, 4.2), time_axis: bool = True):
-    fig = figures.Figure(figsize=size, layout="constrained")
+    fig = Figure(figsize=size, layout="constrained")
     ax = fig.add_subplot()
     panel(ax, trace, loop)
     if time_axis:
@@ -71,7 +73,7 @@ def _single(panel, trace, loop, title: str, size=(11, 4.2), time_axis: bool = Tr
 
 
 def trajectory_figure(run: RecordedRun, loop, title: str):
-    fig = figures.Figure(figsize=(8, 7.5), layout="constrained")
+    fig = Figure(figsize=(8, 7.5), layout="constrained")
     ax = fig.add_subplot()
     if run.trace is not None:
         figures.trajectory_panel(ax, run.trace, loop, "Path in the feasible set (controller's estimate q)")
@@ -83,6 +85,10 @@ def trajectory_figure(run: RecordedRun, loop, title: str):
             figures.draw_feasible_set(ax, loop.feasible, (lo[0] - pad, hi[0] + pad), (lo[1] - pad, hi[1] + pad))
             ax.set_aspect("equal", adjustable="box")
             ax.set_title("Path in the feasible set (ground truth)")
+            names = loop.model.coordinate_names
+            ax.set_xlabel(names[0]), ax.set_ylabel(names[1])
+            ax.plot(*run.truth_q[0, :2], "o", color="k", mfc="white", ms=8, zorder=7)
+            ax.plot(*run.truth_q[-1, :2], "s", color="k", ms=7, zorder=7)
         ax.plot(run.truth_q[:, 0], run.truth_q[:, 1], color="0.2", lw=0.9, alpha=0.8, label="q, ground truth", zorder=5)
         handles, _ = ax.get_legend_handles_labels()
         old = ax.get_legend()
@@ -96,7 +102,7 @@ def trajectory_figure(run: RecordedRun, loop, title: str):
 
 
 def link_figure(run: RecordedRun, title: str):
-    fig = figures.Figure(figsize=(12, 10), layout="constrained")
+    fig = Figure(figsize=(12, 10), layout="constrained")
     axes = fig.subplots(len(LINK_FIELDS) + 1, 1, sharex=True)
     for ax, name in zip(axes, LINK_FIELDS):
         if len(run.link_t):
@@ -128,7 +134,7 @@ def link_figure(run: RecordedRun, title: str):
 
 
 def plot_recording(path: Path | str, out: Path | str, scenario: str | None = None,
-                   overview: bool = True) -> list[Path]:
+                   overview: bool = True, dpi: int = DPI) -> list[Path]:
     """Draw every figure the recording has data for; returns the files written."""
     run = load_run(path)
     loop = _loop(run, scenario)
@@ -136,19 +142,19 @@ def plot_recording(path: Path | str, out: Path | str, scenario: str | None = Non
     out.mkdir(parents=True, exist_ok=True)
     title = run.title or Path(path).name
     written: list[Path] = []
-    with figures.matplotlib.rc_context(figures.FONT):
+    with matplotlib.rc_context(figures.FONT):
         if run.trace is not None or len(run.truth_q):
-            _save(trajectory_figure(run, loop, title), out, "trajectory.png", written)
+            _save(trajectory_figure(run, loop, title), out, "trajectory.png", written, dpi)
         if run.trace is not None:
             trace = run.trace
             for name, panel in (("states", figures.states_panel), ("inputs", figures.inputs_panel),
                                 ("authority", figures.authority_panel), ("estimates", figures.estimates_panel),
                                 ("margin", figures.margin_panel)):
                 fig, _ = _single(panel, trace, loop, title)
-                _save(fig, out, f"{name}.png", written)
+                _save(fig, out, f"{name}.png", written, dpi)
             if overview:
-                _save(figures.run_figure(trace, loop, title), out, "overview.png", written)
-        _save(link_figure(run, title), out, "link.png", written)
+                _save(figures.run_figure(trace, loop, title), out, "overview.png", written, dpi)
+        _save(link_figure(run, title), out, "link.png", written, dpi)
     return written
 
 

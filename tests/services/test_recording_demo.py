@@ -57,22 +57,22 @@ def test_the_recording_opens_with_the_indexed_reader_and_has_the_robots_topics(r
     assert recorded["recording"]["undecoded"] == 0 and recorded["recording"]["dropped"] == 0
 
 
-def test_message_rates_are_the_publishers(recorded):
+def test_nothing_is_lost_while_recording_and_rates_are_the_publishers(recorded):
     messages, status = read_all(recorded["recording"]["mcap"])
     assert status.complete
-    times = {}
+    seqs, times = {}, {}
     for m in messages:
+        seqs.setdefault(m.topic, []).append(m.json()["seq"])
         times.setdefault(m.topic, []).append(m.log_time / 1e9)
-    # RobotState at 50 Hz and GroundTruth at 100 Hz over the whole recording (start-up and stop
-    # included); the operator's 50 Hz commands over the run; loose bounds: a loaded host slows
-    # publishers, but a rate off by a factor of two means messages were lost or duplicated
-    for key, hz in ((keys.state_key(ROBOT), 50.0), (keys.truth_key(ROBOT), 100.0)):
+    for topic, seq in seqs.items():     # every publisher numbers its messages: no gap, no repeat, in order
+        assert seq == list(range(seq[0], seq[0] + len(seq))), topic
+    # RobotState at 50 Hz (the controller's real-time timer) and GroundTruth at 100 Hz over the whole
+    # recording; the Python robot falls behind real time on a loaded 2-core host, hence its wider band
+    for key, hz, low in ((keys.state_key(ROBOT), 50.0, 0.6), (keys.truth_key(ROBOT), 100.0, 0.4)):
         t = times[key]
         rate = (len(t) - 1) / (t[-1] - t[0])
-        assert 0.6 * hz < rate < 1.2 * hz, (key, rate)
-    assert len(times[keys.operator_cmd_key(ROBOT)]) > 0.5 * 50 * DURATION
-    seqs = [m.json()["seq"] for m in messages if m.topic == keys.state_key(ROBOT)]
-    assert seqs == sorted(seqs) and len(set(seqs)) == len(seqs)
+        assert low * hz < rate < 1.2 * hz, (key, rate)
+    assert len(times[keys.operator_cmd_key(ROBOT)]) > 0.5 * 50 * DURATION   # the console's 50 Hz, over the run
 
 
 def test_the_run_config_seed_and_version_are_metadata(recorded):
