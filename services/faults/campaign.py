@@ -19,6 +19,7 @@ forecast puts beyond the measured delay limit), and `aggregate(...)["ok"]` is Fa
 """
 from __future__ import annotations
 
+import itertools
 import json
 import math
 import os
@@ -254,8 +255,10 @@ def demo_argv(case: Case, json_out: Path, log_dir: Path | None = None) -> list[s
 def subprocess_runner(workdir: Path, first_index: int = 0):
     """A runner that starts `sharedctl demo` for a case and reads its JSON; stops it (SIGTERM, then
     SIGKILL — only this process, by PID) if it overruns its duration by RUN_TIMEOUT_MARGIN."""
-    def run(case: Case, index: int) -> RunResult:
-        index += first_index
+    counter = itertools.count(first_index)
+
+    def run(case: Case, _position: int) -> RunResult:
+        index = next(counter)              # every run, retries included, keeps its own files
         out = workdir / f"run{index:04d}.json"
         logs = workdir / f"run{index:04d}-logs"     # read by host_figures; the workdir goes unless kept
         start = time.monotonic()
@@ -284,14 +287,20 @@ def subprocess_runner(workdir: Path, first_index: int = 0):
     return run
 
 
-def run_campaign(cases: list[Case], runner, forecasts=None, on_row=None, should_stop=lambda: False) -> list[dict]:
-    """Run `cases` in order; `on_row(row, done, total)` after each. Stops early if `should_stop()`."""
+def run_campaign(cases: list[Case], runner, forecasts=None, on_row=None, should_stop=lambda: False,
+                 retries: int = 1) -> list[dict]:
+    """Run `cases` in order; `on_row(row, done, total)` after each. Stops early if `should_stop()`.
+    A run that was not exercised (estopped before its start: the fault met no motion) is run again,
+    at most `retries` times; the row says how many attempts it took."""
     rows = []
     for i, case in enumerate(cases):
         if should_stop():
             break
-        result = runner(case, i)
-        row = judge(case, result, forecasts)
+        for attempt in range(retries + 1):
+            row = judge(case, runner(case, i), forecasts)
+            row["attempts"] = attempt + 1
+            if row["outcome"] != "not exercised" or should_stop():
+                break
         rows.append(row)
         if on_row is not None:
             on_row(row, i + 1, len(cases))

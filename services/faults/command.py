@@ -31,7 +31,10 @@ def add_parser(subparsers) -> None:
     c.add_argument("--report", metavar="DIR", help="write README.md and the plots into DIR")
     c.add_argument("--only", metavar="TEXT", action="append", default=[],
                    help="run only the cases whose id contains TEXT (repeatable: any of them)")
-    c.add_argument("--resume", action="store_true", help="keep the measured rows of an existing --json OUT, run the rest")
+    c.add_argument("--resume", action="store_true",
+                   help="keep the measured rows of an existing --json OUT, run the rest (and the runs not exercised)")
+    c.add_argument("--retries", type=int, default=1, metavar="N",
+                   help="run a case again, at most N times, when an estop before its start left it not exercised (default 1)")
     c.add_argument("--budget", type=float, metavar="S", help="start no new run after S seconds")
     c.add_argument("--keep-logs", metavar="DIR", help="keep every run's JSON and process logs in DIR")
     c.add_argument("--list", action="store_true", help="print the cases and exit")
@@ -110,7 +113,7 @@ def run(args) -> int:
         return _rejudge(args, json_out)
     kept = []
     if args.resume and json_out is not None and json_out.exists():
-        kept = [r for r in json.loads(json_out.read_text())["rows"] if r["outcome"] != "error"]
+        kept = [r for r in json.loads(json_out.read_text())["rows"] if r["outcome"] not in ("error", "not exercised")]
         done = {r["id"] for r in kept}
         cases = [c for c in cases if c.id not in done]
     meta = {"command": "sharedctl faults campaign" + (" --quick" if args.quick else ""),
@@ -149,7 +152,7 @@ def run(args) -> int:
             progress.update(task, advance=1, description=nxt, violating=agg["violating_runs"],
                             estops=agg["estop_runs"], margin=margin)
 
-        cp.run_campaign(cases, runner, Forecasts(), on_row, should_stop)
+        cp.run_campaign(cases, runner, Forecasts(), on_row, should_stop, max(args.retries, 0))
     meta["load_after"] = _load()
     result = cp.aggregate(rows, meta)
     result["interrupted"] = len(rows) < len(kept) + len(cases)

@@ -153,6 +153,15 @@ def test_campaign_runs_every_case_in_order_and_aggregates():
     assert result["ok"] is False and sum(f["runs"] for f in result["families"].values()) == 5
 
 
+def test_a_run_estopped_before_its_start_is_run_again_once():
+    early = dict(_summary(), estops=1, event_log=[{"t": -0.5, "kind": "estop"}])
+    results = iter([cp.RunResult(early, 1, 1.0), cp.RunResult(_summary(), 0, 1.0),
+                    cp.RunResult(early, 1, 1.0), cp.RunResult(early, 1, 1.0)])
+    rows = cp.run_campaign(cp.plan(quick=True)[:2], lambda c, i: next(results))
+    assert [(r["outcome"], r["attempts"]) for r in rows] == [("safe", 2), ("not exercised", 2)]
+    assert cp.aggregate(rows)["not_exercised"] == [rows[1]["id"]]
+
+
 def test_campaign_stops_when_asked():
     calls = []
     rows = cp.run_campaign(cp.plan(quick=True), lambda c, i: calls.append(i) or cp.RunResult(_summary(), 0, 1.0),
