@@ -115,7 +115,7 @@ def run(args) -> int:
         recording = open_demo_recording(args.record, args.robot_id, scenario_arg, scenario.name, can_controller,
                                         seed=None if faults.empty else faults.plan.seed)   # docs/recording.md
         faults.start(controller_ep, args.robot_id, log_dir, backstop, start_child, wait_listening)
-        secure.start(log_dir, backstop, start_child, wait_listening)
+        secure.start(log_dir, backstop, wait_listening)
         children["robot"] = start_child("robot", ["robot", "--scenario", scenario_arg,
                                                   *secure.zenoh_args("robot", ["--zenoh-listen", robot_ep]), *can_robot,
                                                   *common, "--duration", backstop], log_dir)
