@@ -11,8 +11,8 @@ put happens there) and written by one writer thread:
 
 Times: ``log_time`` is this host's clock (Unix ns) when the sample arrived; ``publish_time`` is
 the Zenoh timestamp when the sender attached one, else the message's own time field
-(``send_time`` of an operator command, ``time`` of the others: the sender's clock, Unix time for
-operator commands, events and heartbeats, run time for RobotState and GroundTruth), in ns.
+(``send_time`` of an operator command, ``time`` of the others: the sender's own clock, Unix time
+for most, the simulator's clock for GroundTruth and the robot's heartbeat), in ns.
 
 Crash tolerance: the file is chunked (zstd) and the chunk in progress is closed and handed to
 the operating system every :data:`FLUSH_PERIOD` seconds, so a process killed with SIGKILL
