@@ -22,6 +22,7 @@ observer's publications on operator keys. A client that sends a certificate must
 from __future__ import annotations
 
 import json
+import os
 from pathlib import Path
 
 import zenoh
@@ -178,8 +179,10 @@ def write_config(path: str | Path, cfg: dict, header: str = "") -> Path:
     """Save `cfg` as JSON5 (JSON with a `//` comment header), readable by `from_file` and zenohd."""
     path = Path(path)
     comment = "".join(f"// {line}\n" if line else "//\n" for line in header.splitlines())
-    path.write_text(comment + json.dumps(cfg, indent=2) + "\n")
-    path.chmod(0o600)   # it may carry a password
+    fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)   # it may carry a password
+    with os.fdopen(fd, "w") as out:
+        out.write(comment + json.dumps(cfg, indent=2) + "\n")
+    os.chmod(path, 0o600)   # an existing file keeps its mode on O_CREAT
     return path
 
 
