@@ -26,9 +26,9 @@ touch only the data (a frame whose corruption passed the CRC, i.e. a faulty node
 sends a flood of ID (default 0x000, the highest priority) on both buses; udp_multicast has no
 arbitration, so what the flood costs there is receive load on every node.
 
-``buffer_wait_ms`` (mean/max) is how long frames sat in the receive buffer before the gateway
-read them (the interface's kernel timestamp to the read), ``latency_ms`` the time from the read
-to the send: together, the delay the gateway itself adds beyond the injected one.
+A frame's arrival time is the interface's kernel receive timestamp, so delays, windows and
+``latency_ms`` (arrival to send) count from when it reached the gateway, not from when the
+gateway got round to reading it; ``buffer_wait_ms`` (mean/max) is that reading lag.
 
 One thread: `select` on both buses' sockets, drain each ready bus in a batch (non-blocking
 recv until empty, at most BATCH frames), release what is due from a heap, babble when due.
@@ -120,6 +120,7 @@ class CanGateway:
         self.heap: list = []
         self.order = itertools.count()
         self.t0: float | None = None
+        self.armed_wall: float | None = None      # time.time() of the arming (run start), for alignment
         self.echo_ignored = 0
         self.unknown = 0
         self.babble_sent = 0
@@ -132,6 +133,7 @@ class CanGateway:
     def arm(self) -> None:
         if self.t0 is None:
             self.t0 = time.monotonic()
+            self.armed_wall = time.time()
 
     # ----- the loop --------------------------------------------------------------
     def run(self, stop: StopFlag, deadline: float | None = None) -> None:
@@ -178,23 +180,24 @@ class CanGateway:
             return
         stream = self.streams[kind]
         stream.received += 1
-        now = time.monotonic()
-        if msg.timestamp:
-            wait = time.time() - msg.timestamp
+        now = arrival = time.monotonic()
+        if msg.timestamp:     # the interface's receive time: the pipeline sees when the frame arrived
+            wait = max(0.0, time.time() - msg.timestamp)
+            arrival = now - wait
             stream.wait_sum += wait
             stream.wait_max = max(stream.wait_max, wait)
         target = self.buses["robot" if kind == "command" else "controller"]
         if self.t0 is None or not selected(self.link.ids, kind, msg.arbitration_id):
             stream.unimpaired += 1
-            self._send(stream, target, msg, now)
+            self._send(stream, target, msg, arrival)
             return
         packed = HEADER.pack(msg.arbitration_id, 1 if msg.is_remote_frame else 0, msg.dlc) + bytes(msg.data)
-        for release, payload in stream.pipe.feed(now - self.t0, packed):
+        for release, payload in stream.pipe.feed(arrival - self.t0, packed):
             when = self.t0 + release
             if when <= now:
-                self._send(stream, target, _unpack(payload), now)
+                self._send(stream, target, _unpack(payload), arrival)
             else:
-                heapq.heappush(self.heap, (when, next(self.order), kind, payload, now))
+                heapq.heappush(self.heap, (when, next(self.order), kind, payload, arrival))
 
     def _release(self, now: float) -> None:
         while self.heap and self.heap[0][0] <= now:
@@ -237,7 +240,8 @@ class CanGateway:
         wall = time.monotonic() - self.started
         cpu = time.process_time() - self.cpu_start
         frames = sum(s.received for s in self.streams.values())
-        return {"kind": "can-gateway", "armed": self.t0 is not None, "ids": list(self.link.ids),
+        return {"kind": "can-gateway", "armed": self.t0 is not None, "armed_wall": self.armed_wall,
+                "ids": list(self.link.ids),
                 "command": self.streams["command"].report(), "feedback": self.streams["feedback"].report(),
                 "echo_ignored": self.echo_ignored, "unknown": self.unknown, "pending": len(self.heap),
                 "babble": {"setting": list(self.link.babble) if self.link.babble else None, "sent": self.babble_sent,

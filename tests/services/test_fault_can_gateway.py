@@ -66,7 +66,7 @@ def run_stream(controller_spec, robot_spec, bus_args, tmp_path):
             while time.monotonic() < start + i / RATE:
                 time.sleep(0.0002)
             key = i.to_bytes(4, "little")
-            sent[key] = time.monotonic() - start
+            sent[key] = (time.monotonic(), time.time())
             buses[0].send(can.Message(arbitration_id=TORQUE, data=key + bytes(4), is_extended_id=False))
             buses[1].send(can.Message(arbitration_id=ENCODER, data=key + bytes(4), is_extended_id=False))
         time.sleep(0.3)
@@ -79,22 +79,27 @@ def run_stream(controller_spec, robot_spec, bus_args, tmp_path):
         reap([proc])
         for bus in buses:
             bus.shutdown()
-    return sent, got, json.loads((tmp_path / "gw.json").read_text()), start
+    return sent, got, json.loads((tmp_path / "gw.json").read_text())
 
 
-def check(sent, got, report, start):
+def check(sent, got, report):
     n = len(sent)
     commands, feedback = got["robot"], got["controller"]
     assert len(commands) == n                                   # not selected by can.ids: all forwarded
     assert report["command"]["passed_unimpaired"] == n
-    outside = [k for k, t in sent.items() if not 0.95 <= t < 1.35]
-    inside = [k for k, t in sent.items() if 1.05 <= t < 1.25]
+    # run time of each frame on the gateway's clock (its arming, wall time), 20 ms clear of the window's edges
+    run_time = {k: wall - report["armed_wall"] for k, (_, wall) in sent.items()}
+    outside = [k for k, t in run_time.items() if not 0.98 <= t < 1.32]
+    inside = [k for k, t in run_time.items() if 1.02 <= t < 1.28]
+    assert len(inside) > 200
     assert not any(k in feedback for k in inside)               # bus-off: nothing forwarded
     loss = 1 - sum(k in feedback for k in outside) / len(outside)
     assert abs(loss - 0.1) < 0.04, loss
-    delays = sorted(feedback[k] - start - sent[k] for k in outside if k in feedback)
-    assert 0.005 <= delays[len(delays) // 2] < 0.05              # the set 5 ms, plus scheduling on a loaded host
+    delays = sorted(feedback[k] - sent[k][0] for k in outside if k in feedback)
+    assert delays[len(delays) // 2] >= 0.005                    # the set 5 ms (more on a loaded host)
     fb = report["feedback"]
+    assert fb["delay_total_s"] / fb["delayed"] == pytest.approx(0.005, rel=0.01)   # + order-keeping holds
+    assert fb["latency_ms_mean"] >= 5.0
     assert fb["forwarded"] == len(feedback) and fb["blackout_dropped"] + fb["lost"] == n - len(feedback)
     assert min(got["babble"]) > 0.5 * 500 * SECONDS               # the flood reached both buses
     return report

@@ -99,7 +99,8 @@ def test_relay_injects_operator_loss_and_delay_and_telemetry_duplicates(tmp_path
     assert abs(loss - 0.3) < 0.08, loss
     latencies = sorted(delivered[k] - sent[k] for k in delivered)
     median = latencies[len(latencies) // 2]
-    assert 0.095 < median < 0.2, median             # the set 100 ms, plus the loaded host's scheduling
+    assert 0.1 <= median < 0.5, median              # the set 100 ms, plus the scheduling of a loaded host
+    assert report["operator"]["latency_ms_mean"] >= 100
     assert report["operator"]["received"] == N and report["operator"]["lost"] == N - len(delivered)
     dup_rate = len(states) / N - 1
     assert abs(dup_rate - 0.5) < 0.1, dup_rate
