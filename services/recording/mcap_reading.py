@@ -46,6 +46,7 @@ class ReadStatus:
     complete: bool = False             # the footer was reached: a cleanly closed file
     stopped_by: str | None = None      # the error at the first incomplete record, if any
     messages: int = 0
+    records: int = 0                   # 0 after reading: not an MCAP file at all
     metadata: dict[str, dict[str, str]] = field(default_factory=dict)
     attachments: list[Attachment] = field(default_factory=list)
     schemas: dict[int, Schema] = field(default_factory=dict)
@@ -66,6 +67,7 @@ class RecordingReader:
             reader = StreamReader(stream, skip_magic=False, validate_crcs=True)
             try:
                 for record in reader.records:
+                    status.records += 1
                     if isinstance(record, Schema):
                         status.schemas[record.id] = record
                     elif isinstance(record, Channel):
@@ -102,6 +104,16 @@ class RecordingReader:
             if isinstance(record, (Message, Schema, Channel)):
                 break
         return dict(self.status.metadata)
+
+
+class NotARecording(ValueError):
+    """The file does not even start like an MCAP file."""
+
+
+def check_readable(status: ReadStatus, path) -> None:
+    """Raise :class:`NotARecording` if nothing could be read from ``path``."""
+    if status.records == 0:
+        raise NotARecording(f"{path}: not an MCAP file ({status.stopped_by})")
 
 
 def read_all(path: Path | str) -> tuple[list[RecordedMessage], ReadStatus]:

@@ -161,7 +161,7 @@ def plot_recording(path: Path | str, out: Path | str, scenario: str | None = Non
 def run(args) -> int:
     try:
         written = plot_recording(args.file, args.out, args.scenario, overview=not args.no_overview)
-    except (OSError, ScenarioError, tomllib.TOMLDecodeError) as exc:
+    except (OSError, ValueError, ScenarioError) as exc:   # NotARecording, TOMLDecodeError are ValueErrors
         print(f"{PROG}: {exc}", file=sys.stderr)
         return 2
     print(f"{PROG}: {len(written)} figures in {args.out}: {', '.join(p.name for p in written)}")

@@ -17,7 +17,7 @@ import numpy as np
 from sharedctl.simulator import Trace
 
 from .flight_recorder import METADATA_RUN, METADATA_SCENARIO
-from .mcap_reading import ReadStatus, RecordingReader
+from .mcap_reading import ReadStatus, RecordingReader, check_readable
 
 AUTHORITY_CODE = {"human": 0, "shared": 1, "machine": 2}
 SET_CLASS_CODE = {"safe": 0, "hysteresis": 1, "hazard": 2}
@@ -63,6 +63,17 @@ def _set_class(state: dict) -> int:
     return min(classes) if classes else -1
 
 
+def _checked_state(body: dict) -> dict:
+    """A RobotState body with every field the trace reads (KeyError/TypeError otherwise)."""
+    for name in ("q", "qd_hat", "q_ref", "u_h", "u_f", "u_s", "wheel_torques", "theta_hat"):
+        body[name] = [float(x) for x in body[name]]
+    for name in ("k_h", "k_f", "min_margin"):
+        body[name] = float(body[name])
+    body["link"] = {name: float(body["link"][name]) for name in LINK_FIELDS}
+    list(body["group_classes"]), str(body["authority"])
+    return body
+
+
 def load_run(path: Path | str) -> RecordedRun:
     """Read a recording (complete or cut short) into arrays."""
     reader = RecordingReader(path)
@@ -75,16 +86,20 @@ def load_run(path: Path | str) -> RecordedRun:
         topic_times.setdefault(message.topic, []).append(t)
         if message.undecoded:
             continue
-        body = message.json()
-        kind = body.get("type")
-        if kind == "robot_state":
-            states.append((t, body))
-        elif kind == "operator_command":
-            commands.append((t, body["q_d"]))
-        elif kind == "ground_truth":
-            truth.append((t, body["q"]))
-        elif kind == "event":
-            events.append((t, body["kind"], body["severity"], body["text"]))
+        try:
+            body = message.json()
+            kind = body.get("type")
+            if kind == "robot_state":
+                states.append((t, _checked_state(body)))
+            elif kind == "operator_command":
+                commands.append((t, [float(x) for x in body["q_d"]]))
+            elif kind == "ground_truth":
+                truth.append((t, [float(x) for x in body["q"]]))
+            elif kind == "event":
+                events.append((t, str(body["kind"]), str(body["severity"]), str(body["text"])))
+        except (ValueError, KeyError, TypeError, AttributeError):   # not a sharedctl message: leave it out
+            continue
+    check_readable(reader.status, path)
     trace = _trace(states, commands) if states else None
     link_t = np.array([t for t, _ in states])
     link = {name: np.array([s["link"][name] for _, s in states], dtype=float) for name in LINK_FIELDS}

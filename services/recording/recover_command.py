@@ -19,7 +19,7 @@ from pathlib import Path
 from mcap.records import Attachment, Channel, Message, Metadata, Schema
 from mcap.writer import CompressionType, Writer
 
-from .mcap_reading import RecordingReader
+from .mcap_reading import NotARecording, RecordingReader
 
 PROG = "sharedctl record-recover"
 
@@ -57,7 +57,7 @@ def recover_mcap(source: Path, target: Path) -> dict:
                 writer.add_message(channel_ids[record.channel_id], log_time=record.log_time, data=record.data,
                                    publish_time=record.publish_time, sequence=record.sequence)
         if not started:
-            raise ValueError(f"{source}: not an MCAP file ({reader.status.stopped_by})")
+            raise NotARecording(f"{source}: not an MCAP file ({reader.status.stopped_by})")
         writer.finish()
     status = reader.status
     return {"messages": status.messages, "channels": len(channel_ids), "was_complete": status.complete,

@@ -25,7 +25,7 @@ from sharedctl.protocol.msgpack_codec import decode_message
 
 from .. import zenoh_session
 from ..lifecycle import StopFlag
-from .mcap_reading import RecordedMessage, RecordingReader
+from .mcap_reading import NotARecording, RecordedMessage, RecordingReader, check_readable
 
 PROG = "sharedctl replay"
 
@@ -118,6 +118,8 @@ def replay(path, session, speed: float = 1.0, stop: StopFlag | None = None) -> R
     report.wall_seconds = time.monotonic() - start_wall
     report.complete_file = reader.status.complete
     report.stopped_by = reader.status.stopped_by
+    if not stop.stopped:
+        check_readable(reader.status, path)
     return report
 
 
@@ -141,6 +143,9 @@ def run(args) -> int:
         if stop.wait(args.delay):
             return 0
         report = replay(args.file, session, args.speed, stop)
+    except NotARecording as exc:
+        print(f"{PROG}: {exc}", file=sys.stderr)
+        return 2
     finally:
         session.close()
     tail = "" if report.complete_file else f"; the file ends early ({report.stopped_by}): sharedctl record-recover"
