@@ -172,3 +172,14 @@ def test_recover_drops_a_cut_last_line_of_a_candump_log(tmp_path):
 def test_reader_reports_metadata_without_reading_the_messages(tmp_path):
     record(tmp_path / "r.mcap", [(k, encode_message(m)) for k, m in samples()]).close()
     assert RecordingReader(tmp_path / "r.mcap").metadata() == {"sharedctl": {"version": "test", "seed": "7"}}
+
+
+def test_a_file_that_is_not_mcap_is_refused_with_a_typed_error(tmp_path):
+    from sharedctl.services.recording.mcap_reading import NotARecording
+    from sharedctl.services.recording.recorded_run import load_run
+
+    (tmp_path / "junk.mcap").write_bytes(b"not an mcap file at all")
+    with pytest.raises(NotARecording):
+        load_run(tmp_path / "junk.mcap")
+    with pytest.raises(NotARecording):
+        recover_mcap(tmp_path / "junk.mcap", tmp_path / "out.mcap")
