@@ -104,6 +104,7 @@ class FlightRecorder:
                 raise
         self._subscribers: list = []
         self._own_sessions: list = []
+        self.endpoint: str | None = None      # where publishers connect, once listen() was called
         self.started = time.monotonic()
 
     def attach(self, session) -> None:
@@ -114,6 +115,7 @@ class FlightRecorder:
         """Open a session of the recorder's own on a loopback endpoint (publishers connect to it)."""
         session = zenoh_session.open_session(listen=[endpoint], connect=connect)
         self._own_sessions.append(session)
+        self.endpoint = endpoint
         self.attach(session)
         return session
 

@@ -36,12 +36,12 @@ def open_demo_recording(directory: str | None, robot_id: str, scenario: str, sce
                                   seed=seed, can_spec=bus_spec_from_argv(controller_can_argv), extra=extra)
     except (OSError, ValueError) as exc:
         raise RuntimeError(f"cannot record into {directory}: {exc}") from exc
-    recorder.endpoint = f"tcp/127.0.0.1:{free_loopback_port()}"
+    endpoint = f"tcp/127.0.0.1:{free_loopback_port()}"
     try:
-        recorder.listen(recorder.endpoint)
+        recorder.listen(endpoint)
     except Exception as exc:
         recorder.close()
-        raise RuntimeError(f"recorder session on {recorder.endpoint}: {exc}") from exc
+        raise RuntimeError(f"recorder session on {endpoint}: {exc}") from exc
     return recorder
 
 
