@@ -50,7 +50,15 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
-    args = build_parser().parse_args(argv)
+    from .service_config import ServiceConfigError, expand
+
+    parser = build_parser()
+    try:
+        argv = expand(list(sys.argv[1:] if argv is None else argv), parser)   # --service-config FILE.toml
+    except ServiceConfigError as exc:
+        print(f"sharedctl: {exc}", file=sys.stderr)
+        return 2
+    args = parser.parse_args(argv)
     return int(args.handler(args) or 0)
 
 

@@ -8,6 +8,7 @@ from sharedctl.protocol.errors import KeyExprError
 from sharedctl.scenario import ScenarioError
 
 from ..lifecycle import StopFlag
+from ..service_config import add_argument as add_service_config_argument
 from ..scenario_files import load
 from ..security import zenoh_config
 from ..zenoh_session import DEFAULT_ENDPOINT, EndpointError
@@ -30,6 +31,7 @@ def add_parser(subparsers) -> None:
     p.add_argument("--rate", type=float, default=50.0, metavar="HZ", help="command rate (default 50)")
     p.add_argument("--deadman", choices=("toggle", "hold"), default="toggle",
                    help="space toggles the deadman, or holds it while the key repeats (default toggle)")
+    add_service_config_argument(p)
     p.set_defaults(handler=run)
 
 

@@ -19,6 +19,7 @@ from sharedctl.scenario import ScenarioError
 from .. import can_bus, zenoh_session
 from ..security import zenoh_config
 from ..lifecycle import StopFlag
+from ..service_config import add_argument as add_service_config_argument
 from ..scenario_files import load
 from .daemon import ControllerDaemon, DaemonConfig
 from .priority import LEVELS, make_loop_realtime, raise_nice
@@ -50,6 +51,8 @@ def add_parser(subparsers) -> None:
                    help="scheduling: realtime = nice -10 and SCHED_FIFO 20 for the loop thread (default; falls back "
                         "when not permitted), high = nice -10 only, normal")
     p.add_argument("--quiet", action="store_true", help="no warnings on stderr (events are still published)")
+    p.add_argument("--sensor-sync", action="store_true",
+                   help="lock the tick phase to the wheel estimates' arrival (lower sensor → torque latency; phase.py)")
     p.add_argument("--lease", choices=("implicit", "explicit"), default="implicit",
                    help="operator authority lease: implicit = a command while nobody holds control takes it "
                         "(default); explicit = only a take on the lease queryable (or in-band) grants control")
@@ -60,6 +63,7 @@ def add_parser(subparsers) -> None:
     p.add_argument("--max-clock-skew-ms", type=float,
                    help="drop operator messages whose |receive wall time - send_time| exceeds this (only for hosts "
                         "synchronised by chrony/PTP; default: no absolute bound)")
+    add_service_config_argument(p)
     p.set_defaults(handler=run)
 
 
@@ -84,7 +88,7 @@ def run(args) -> int:
     config = DaemonConfig(
         robot_id=robot_id, rate=args.rate, telemetry_rate=args.telemetry_rate, torque_limit=args.torque_limit,
         feedback_timeout=args.feedback_timeout_ms / 1e3, duration=args.duration, verbose=not args.quiet,
-        realtime=args.priority == "realtime", lease_mode=args.lease, lease_expiry=args.lease_expiry_ms / 1e3,
+        realtime=args.priority == "realtime", sensor_sync=args.sensor_sync, lease_mode=args.lease, lease_expiry=args.lease_expiry_ms / 1e3,
         max_command_age=args.max_command_age_ms / 1e3,
         max_clock_skew=None if args.max_clock_skew_ms is None else args.max_clock_skew_ms / 1e3,
     )

@@ -20,6 +20,7 @@ from sharedctl.scenario import ScenarioError
 from .. import can_bus, zenoh_session
 from ..security import zenoh_config
 from ..lifecycle import StopFlag
+from ..service_config import add_argument as add_service_config_argument
 from ..scenario_files import load
 from .plant import RobotSimConfig, RobotSimConfigError
 from .process import CpuMeter, RobotProcess
@@ -40,6 +41,7 @@ def add_parser(subparsers) -> None:
     zenoh_config.add_argument(p)
     p.add_argument("--robot-id", default="robot1", help="robot id in the Zenoh keys (default: robot1)")
     p.add_argument("--duration", type=float, metavar="S", help="stop after S seconds (default: run until SIGINT/SIGTERM)")
+    add_service_config_argument(p)
     p.set_defaults(handler=run)
 
 

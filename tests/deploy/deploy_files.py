@@ -1,0 +1,48 @@
+"""Paths and readers shared by the deploy-file tests."""
+from __future__ import annotations
+
+import re
+import shlex
+from pathlib import Path
+
+import yaml
+
+from sharedctl.services.cli import build_parser
+from sharedctl.services.service_config import expand
+
+ROOT = Path(__file__).resolve().parents[2]
+DEPLOY = ROOT / "deploy"
+DOC = ROOT / "docs" / "deploy.md"
+UNITS = sorted((DEPLOY / "systemd").glob("*.service"))
+
+
+def compose() -> dict:
+    return yaml.safe_load((DEPLOY / "docker-compose.yml").read_text())
+
+
+def locked_version(package: str) -> str:
+    for line in (ROOT / "requirements.lock").read_text().splitlines():
+        name, _, version = line.partition("==")
+        if name.strip().lower() == package.lower():
+            return version.strip()
+    raise AssertionError(f"{package} is not in requirements.lock")
+
+
+def parse_command(argv: list[str]):
+    """The argparse namespace a sharedctl command line (with --service-config expanded) gives."""
+    parser = build_parser()
+    return parser.parse_args(expand(list(argv), parser))
+
+
+def unit_exec_start(unit: Path) -> list[str]:
+    line = next(l for l in unit.read_text().splitlines() if l.startswith("ExecStart="))
+    return shlex.split(line.split("=", 1)[1])
+
+
+def unit_keys(unit: Path) -> dict[str, str]:
+    keys = {}
+    for line in unit.read_text().splitlines():
+        m = re.match(r"^([A-Za-z]+)=(.*)$", line)
+        if m:
+            keys[m.group(1)] = m.group(2)
+    return keys

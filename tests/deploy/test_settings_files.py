@@ -1,0 +1,49 @@
+"""Service settings files (`--service-config FILE.toml`): deploy/config/*.toml and the reader (services/service_config.py)."""
+import pytest
+
+from sharedctl.services.cli import build_parser, main
+from sharedctl.services.service_config import ServiceConfigError, expand
+
+from .deploy_files import DEPLOY, parse_command
+
+
+@pytest.mark.parametrize("name", ["robot", "controller", "console"])
+def test_each_example_settings_file_parses_as_its_command(name):
+    args = parse_command([name, "--service-config", str(DEPLOY / "config" / f"{name}.toml")])
+    assert args.robot_id == "robot1"
+
+
+def test_the_site_controller_takes_control_explicitly_and_bounds_command_age():
+    args = parse_command(["controller", "--service-config", str(DEPLOY / "config" / "controller.toml")])
+    assert args.lease == "explicit" and args.lease_expiry_ms == 1000.0
+    assert args.max_command_age_ms == 500.0 and args.max_clock_skew_ms == 2000.0
+
+
+def test_a_command_line_option_after_the_file_wins(tmp_path):
+    path = tmp_path / "c.toml"
+    path.write_text('rate = 250.0\nquiet = true\ncan-option = ["port=1", "bitrate=500000"]\n')
+    argv = expand(["controller", "--service-config", str(path), "--rate", "400"], build_parser())
+    assert argv == ["controller", "--rate", "250.0", "--quiet", "--can-option", "port=1", "--can-option",
+                    "bitrate=500000", "--rate", "400"]
+    assert parse_command(argv).rate == 400.0
+
+
+@pytest.mark.parametrize("text,message", [
+    ("no-such-option = 1\n", "unknown key 'no-such-option'"),
+    ("quiet = 1\n", "quiet: expected true or false"),
+    ("[controller]\nrate = 1\n", "controller"),
+    ("rate = [[1]]\n", "rate: expected a string or a number"),
+    ("rate = \n", "not valid TOML"),
+])
+def test_a_bad_settings_file_is_refused_naming_the_key(tmp_path, text, message):
+    path = tmp_path / "bad.toml"
+    path.write_text(text)
+    with pytest.raises(ServiceConfigError, match=message):
+        expand(["controller", "--service-config", str(path)], build_parser())
+
+
+def test_the_command_line_exits_2_on_a_bad_settings_file(tmp_path, capsys):
+    path = tmp_path / "bad.toml"
+    path.write_text("ratee = 500\n")
+    assert main(["controller", "--service-config", str(path)]) == 2
+    assert "ratee" in capsys.readouterr().err
