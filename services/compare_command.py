@@ -6,7 +6,8 @@ safety filter) and `shared` (the paper's law). Each runs in the same sampled loo
 RK4 at 2 kHz) behind the same in-process operator link, once ideal and once with 100 ms each way
 and 20 % command loss (seeded). The JSON's `results` hold one row per run with `strategy`,
 `scenario` (the scenario and the condition), `base_scenario`, `condition` and the metrics of
-sharedctl/baselines/comparison_metrics.py. Exit 1 if the shared law violated the set anywhere
+sharedctl/baselines/comparison_metrics.py; `model_sensitivity` repeats `mux` and `cbf` on the
+adversarial scenarios with wrong nominal parameters (θ̂ = 0.5θ and 2θ). Exit 1 if the shared law violated the set anywhere
 (the one guarantee this command checks), 2 on bad arguments.
 """
 from __future__ import annotations
@@ -65,7 +66,33 @@ def compare(entries: list[Entry], strategies=STRATEGIES, conditions=CONDITIONS, 
     return outcomes
 
 
-def document(outcomes: list[Outcome], quick: bool) -> dict:
+THETA_SCALES = (0.5, 2.0)   # the nominal parameters given to mux and cbf in the model-error runs: θ̂ = s·θ
+
+
+def model_sensitivity(entries: list[Entry], strategies=("mux", "cbf"), scales=THETA_SCALES, progress=None) -> list[dict]:
+    """The model-based baselines with wrong nominal parameters, on the adversarial scenarios (ideal link).
+
+    `mux` and `cbf` use M̂, Ĉ, ĝ; the shared law needs none (its θ̂ starts at 0 and adapts), so
+    it has no counterpart here.
+    """
+    rows = []
+    for entry in entries:
+        if not entry.scenario.name.startswith("adversarial"):
+            continue
+        for scale in scales:
+            for name in strategies:
+                loop, q0, v0 = entry.scenario.closed_loop()
+                trace = run(build_strategy(name, loop, theta=scale * loop.model.theta), loop, q0, v0, entry.duration)
+                row = {"strategy": name, "scenario": f"{entry.scenario.name}/theta*{scale:g}",
+                       "base_scenario": entry.scenario.name, "theta_scale": scale,
+                       **summarize(trace, loop.feasible, CONTROL_PERIOD)}
+                rows.append(row)
+                if progress:
+                    progress(row)
+    return rows
+
+
+def document(outcomes: list[Outcome], quick: bool, sensitivity: list[dict] | None = None) -> dict:
     """The JSON document."""
     entries = {o.entry.scenario.name: o.entry for o in outcomes}
     try:
@@ -80,6 +107,7 @@ def document(outcomes: list[Outcome], quick: bool) -> dict:
         "conditions": {c.name: asdict(c) for c in CONDITIONS},
         "scenarios": [{"name": n, "duration": e.duration, "source": e.source} for n, e in entries.items()],
         "results": [o.row for o in outcomes],
+        "model_sensitivity": sensitivity or [],
     }
 
 
@@ -91,8 +119,10 @@ def handle(args) -> int:
         return 2
     quiet = args.json == "-"
     progress = None if quiet else _progress_line
-    outcomes = compare(scenario_set(args.quick, args.duration), strategies, CONDITIONS, progress)
-    doc = document(outcomes, args.quick)
+    entries = scenario_set(args.quick, args.duration)
+    outcomes = compare(entries, strategies, CONDITIONS, progress)
+    sensitivity = model_sensitivity(entries, tuple(s for s in ("mux", "cbf") if s in strategies), progress=progress)
+    doc = document(outcomes, args.quick, sensitivity)
     text = json.dumps(doc, indent=2)
     if args.json == "-":
         print(text)

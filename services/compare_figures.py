@@ -114,6 +114,7 @@ def signals_figure(outcomes, title: str) -> Figure:
         ax_m.set_ylim(min(lo, 0.0) - 0.05, None)
         ax_m.set_ylabel("margin to the nearest face (m)\n(human cut below)")
         ax_u.set_yscale("symlog", linthresh=10.0)
+        ax_u.set_ylim(bottom=0.0)
         ax_u.set_ylabel("|u| (N)")
         ax_c.set_yticks([len(outcomes) - 1 - i + 0.5 for i in range(len(outcomes))],
                         [o.row["strategy"] for o in outcomes])

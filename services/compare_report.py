@@ -90,6 +90,111 @@ def _head_to_head(rows, labels, a: str, b: str) -> list[str]:
     return lines
 
 
+def _share(rows, labels, a, b, metric) -> tuple[int, int]:
+    """(runs where a is strictly better than b on metric, runs compared)."""
+    table = {(r["strategy"], r["scenario"]): r for r in rows}
+    pairs = [(table[(a, lb)], table[(b, lb)]) for lb in labels if (a, lb) in table and (b, lb) in table]
+    sign = BETTER[metric]
+    return sum(1 for ra, rb in pairs if sign * (ra[metric] - rb[metric]) > 1e-12), len(pairs)
+
+
+def _where(rows, labels, a, b, metric) -> str:
+    table = {(r["strategy"], r["scenario"]): r for r in rows}
+    sign = BETTER[metric]
+    return ", ".join(f"`{lb}`" for lb in labels if (a, lb) in table and (b, lb) in table
+                     and sign * (table[(a, lb)][metric] - table[(b, lb)][metric]) > 1e-12)
+
+
+def _reading(rows, labels) -> list[str]:
+    """Plain statements, each printed only when the numbers of this run support it."""
+    names = {r["strategy"] for r in rows}
+    if not {"cbf", "shared"} <= names:
+        return []
+    out = ["", "## Reading the numbers", ""]
+    better, n = _share(rows, labels, "cbf", "shared", "tracking_error")
+    where = _where(rows, labels, "cbf", "shared", "tracking_error")
+    if 2 * better > n:
+        out.append(f"- **The CBF filter tracks the operator's wish better than the shared law** in {better} of {n} "
+                   "runs. It changes the operator's force by the least amount that keeps the barrier "
+                   "condition, and only along the faces' normals; the shared law hands the robot to a "
+                   "machine law that tracks its own projected reference.")
+    elif better:
+        out.append(f"- The CBF filter tracks the operator's wish better than the shared law in {better} of {n} runs "
+                   f"({where}); the shared law tracks better in the others.")
+    fewer, n = _share(rows, labels, "cbf", "shared", "interventions")
+    if fewer:
+        out.append(f"- **The CBF filter intervenes less often** ({fewer} of {n} runs): once a constraint binds "
+                   "it keeps shaping the force continuously instead of switching authority back and forth; "
+                   "the shared law's Schmitt trigger takes over and hands back at least once per approach.")
+    calmer, n = _share(rows, labels, "cbf", "shared", "control_effort")
+    smoother, _ = _share(rows, labels, "cbf", "shared", "jerk_rms")
+    if calmer or smoother:
+        out.append(f"- **The CBF filter spends less force and jerks less**: effort lower in {calmer} of {n} runs, "
+                   f"jerk lower in {smoother} of {n}. The shared law's machine law (12) pushes through a "
+                   "barrier whose force grows like 1/x near a face and takes full authority for at least "
+                   "the 0.25 s dwell, so its forces are large and switch at the control rate.")
+    more, n = _share(rows, labels, "shared", "cbf", "human_authority")
+    if more:
+        out.append(f"- **The shared law leaves the operator in sole command more of the time** ({more} of {n} "
+                   "runs): in its safe set u_s = u_h exactly, while the filter alters the force whenever a "
+                   "constraint binds, which on an adversarial operator is most of the run.")
+    wider, n = _share(rows, labels, "shared", "cbf", "min_margin")
+    if wider:
+        out.append(f"- The shared law keeps more room from the faces than the filter's δ in {wider} of {n} runs "
+                   "(a design choice on both sides: b0 for one, δ for the other).")
+    if "mux" in names:
+        worse, n = _share(rows, labels, "shared", "mux", "tracking_error")
+        jerkier, _ = _share(rows, labels, "cbf", "mux", "jerk_rms")
+        out.append(f"- `mux` keeps the robot inside by stopping it: the operator's command is dropped while the "
+                   f"hold is selected, so motion along a face is stop-and-go (the shared law tracks better "
+                   f"in {worse} of {n} runs; the mux jerks more than the filter in {jerkier} of {n}).")
+        table = {(r["strategy"], r["scenario"]): r for r in rows}
+        stuck = [(lb, table[("mux", lb)]["tracking_error"] / table[("shared", lb)]["tracking_error"]) for lb in labels
+                 if ("mux", lb) in table and ("shared", lb) in table
+                 and table[("mux", lb)]["tracking_error"] > 2.0 * table[("shared", lb)]["tracking_error"]]
+        if stuck:
+            runs = ", ".join(f"`{lb}` ({ratio:.1f}×)" for lb, ratio in stuck)
+            out.append(f"- **`mux` can get stuck at a face**: tracking error more than twice the shared law's in {runs}. "
+                       "The hold drops the whole command, not just its part into the face: an operator whose "
+                       "command keeps any component into the face (as the scripted operator pulling along x = 0 "
+                       "does) re-triggers the hold within a sample of every hand-back and never slides along it.")
+    impaired = [r["hands_off"] for r in rows if r["condition"] != "ideal" and r["hands_off"] is not None]
+    if impaired:
+        out.append(f"- Under {IMPAIRED.name} the operator was hands-off {min(impaired):.1%}–{max(impaired):.1%} of "
+                   f"the time, including the first {IMPAIRED.uplink_delay * 1e3:.0f} ms before the first command "
+                   "arrives: with independent losses a 0.3 s silence needs 15 losses in a row. The link "
+                   "mostly adds delay and a jittery hold of the operator's command.")
+    out.append("- **Model knowledge**: `mux` and `cbf` here are given the plant's true M, C, g; the shared "
+               "law is not (θ̂(0) = 0). The next section gives them a wrong model.")
+    return out
+
+
+def _model_error(rows) -> list[str]:
+    if not rows:
+        return []
+    out = ["", "## When the model is wrong", "",
+           "`mux` and `cbf` again on the adversarial scenarios (ideal link) with nominal parameters "
+           "θ̂ = s·θ instead of the true θ (s < 1: the robot is heavier than they think):", "",
+           "| strategy | scenario | s | violations | min margin (m) | tracking error | interventions |",
+           "|---|---|---|---|---|---|---|"]
+    for r in rows:
+        out.append(f"| `{r['strategy']}` | {r['base_scenario']} | {r['theta_scale']:g} | {r['violations']} | "
+                   f"{_fmt(r['min_margin'])} | {_fmt(r['tracking_error'])} | {r['interventions']} |")
+    bad = [r for r in rows if r["violations"]]
+    out.append("")
+    for r in bad:
+        out.append(f"- `{r['strategy']}` with θ̂ = {r['theta_scale']:g}θ **left the set** on {r['base_scenario']} "
+                   f"({r['violations']} samples, min margin {r['min_margin']:+.3f} m).")
+    if any(r["strategy"] == "cbf" and r["theta_scale"] < 1 for r in bad):
+        out.append("- Why the filter fails with a light model: its constraint predicts q̈ = M̂⁻¹(u − Ĉq̇ − ĝ); "
+                   "believing the robot lighter, it expects more deceleration from a braking force than the "
+                   "robot delivers, brakes too little and arrives at the face too fast. A CBF filter's "
+                   "guarantee is only as good as its model; the shared law needs none (θ̂(0) = 0 in every run above).")
+    if not bad:
+        out.append("- Neither model-based baseline left the set with these parameter errors.")
+    return out
+
+
 def _markdown(doc, rows, strategies, labels, figures) -> str:
     impaired = IMPAIRED
     mux, cbf = PriorityMux, CbfSafetyFilter
@@ -175,6 +280,8 @@ def _markdown(doc, rows, strategies, labels, figures) -> str:
     out += _head_to_head(rows, labels, "cbf", "shared")
     out += ["", "`mux` against `shared`, run by run:", ""]
     out += _head_to_head(rows, labels, "mux", "shared")
+    out += _reading(rows, labels)
+    out += _model_error(doc.get("model_sensitivity") or [])
     out += ["", "## Results", ""]
     for label in labels:
         out += [f"### {label}", "", "| strategy | " + " | ".join(COLUMNS) + " |", "|---|" + "---|" * len(COLUMNS)]

@@ -25,6 +25,9 @@ def test_every_row_has_strategy_scenario_and_the_metrics(tmp_path):
         for key in METRICS:
             assert isinstance(r[key], (int, float)), (key, r)
         assert r["steps"] == 50
+    sensitivity = doc["model_sensitivity"]                  # mux and cbf with θ̂ = s·θ, adversarial scenarios
+    assert {r["strategy"] for r in sensitivity} == {"mux", "cbf"}
+    assert all(r["base_scenario"].startswith("adversarial") and r["theta_scale"] != 1.0 for r in sensitivity)
 
 
 def test_the_report_is_written_with_its_figures(tmp_path):
