@@ -1,8 +1,10 @@
 """`sharedctl` command line: one sub-command per module.
 
-Each module named in COMMANDS defines ``add_parser(subparsers)``, which adds its
-sub-command and sets ``handler`` (a function taking the parsed args, returning an
-exit code) with ``parser.set_defaults(handler=...)``.
+COMMANDS maps each sub-command's name to its module, which defines ``add_parser(subparsers)``:
+it adds the sub-command and sets ``handler`` (a function taking the parsed args, returning an
+exit code) with ``parser.set_defaults(handler=...)``. Only the module of the command being run
+is imported (a robot or controller process does not pay for matplotlib); ``--help`` and an
+unknown command import them all.
 """
 from __future__ import annotations
 
@@ -10,35 +12,37 @@ import argparse
 import importlib
 import sys
 
-COMMANDS = (
-    "sharedctl.services.sim_command",
-    "sharedctl.services.paper_command",
-    "sharedctl.services.fuzz_command",
-    "sharedctl.services.robot.command",
-    "sharedctl.services.controller.command",
-    "sharedctl.services.console.command",
-    "sharedctl.services.demo_command",
-    "sharedctl.services.bench.command",
-    "sharedctl.services.compare_command",
-    "sharedctl.services.faults.command",
-    "sharedctl.services.security.router_command",
-    "sharedctl.services.security.credentials_command",
-    "sharedctl.services.faults.zenoh_relay",
-    "sharedctl.services.faults.can_gateway",
-    "sharedctl.services.recording.record_command",
-    "sharedctl.services.recording.recover_command",
-    "sharedctl.services.recording.replay_command",
-    "sharedctl.services.recording.plot_command",
-)
+COMMANDS = {
+    "sim": "sharedctl.services.sim_command",
+    "paper": "sharedctl.services.paper_command",
+    "fuzz": "sharedctl.services.fuzz_command",
+    "robot": "sharedctl.services.robot.command",
+    "controller": "sharedctl.services.controller.command",
+    "console": "sharedctl.services.console.command",
+    "demo": "sharedctl.services.demo_command",
+    "bench": "sharedctl.services.bench.command",
+    "compare": "sharedctl.services.compare_command",
+    "faults": "sharedctl.services.faults.command",
+    "router": "sharedctl.services.security.router_command",
+    "credentials": "sharedctl.services.security.credentials_command",
+    "fault-relay": "sharedctl.services.faults.zenoh_relay",
+    "fault-gateway": "sharedctl.services.faults.can_gateway",
+    "record": "sharedctl.services.recording.record_command",
+    "record-recover": "sharedctl.services.recording.recover_command",
+    "replay": "sharedctl.services.recording.replay_command",
+    "plot": "sharedctl.services.recording.plot_command",
+}
 
 
-def build_parser() -> argparse.ArgumentParser:
+def build_parser(command: str | None = None) -> argparse.ArgumentParser:
+    """The parser of one sub-command (`command`, if it is a known name), else of all of them."""
     parser = argparse.ArgumentParser(
         prog="sharedctl",
         description="Shared-control teleoperation: simulation, services and tools.",
     )
     subparsers = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
-    for module_name in COMMANDS:
+    modules = [COMMANDS[command]] if command in COMMANDS else list(dict.fromkeys(COMMANDS.values()))
+    for module_name in modules:
         try:
             module = importlib.import_module(module_name)
         except ModuleNotFoundError as exc:  # a command not built yet must not break the others
@@ -52,9 +56,10 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: list[str] | None = None) -> int:
     from .service_config import ServiceConfigError, expand
 
-    parser = build_parser()
+    argv = list(sys.argv[1:] if argv is None else argv)
+    parser = build_parser(argv[0] if argv else None)
     try:
-        argv = expand(list(sys.argv[1:] if argv is None else argv), parser)   # --service-config FILE.toml
+        argv = expand(argv, parser)   # --service-config FILE.toml
     except ServiceConfigError as exc:
         print(f"sharedctl: {exc}", file=sys.stderr)
         return 2
