@@ -350,12 +350,15 @@ def judge(case: Case, result: RunResult, forecasts=None) -> dict:
             what = (f"torque loop delayed by {1e3 * lag:.0f} ms or more" if lag else
                     f"controller hung {1e3 * hang[1]:.0f} ms at {hang[0]:g} s (torque held)")
             explained = f"{what}: beyond the measured delay limit (in-process margin {delayed['worst_min_margin']:.3f} m)"
-        elif estop_first:
-            explained = f"estop at {estop_first[0]:.2f} s before the first violation: coasting"
-        elif overloaded(host):
-            explained = (f"host overloaded: the robot's real-time loop missed {host['robot_missed_ticks']:.0f} of "
-                         f"{host['robot_physics_steps']:.0f} ticks (stalls caught up with the torque held: a torque-loop "
-                         f"delay beyond the limit of docs/safety.md §3)")
+        else:
+            reasons = []
+            if overloaded(host):
+                reasons.append(f"host overloaded: the robot's real-time loop missed {host['robot_missed_ticks']:.0f} of "
+                               f"{host['robot_physics_steps']:.0f} ticks (stalls caught up with the torque held: a "
+                               f"torque-loop delay beyond the limit of docs/safety.md §3)")
+            if estop_first:
+                reasons.append(f"estop at {estop_first[0]:.2f} s before the first violation: coasting")
+            explained = "; ".join(reasons) or None
     min_margin = s.get("min_margin")
     return {
         "id": case.id, "scenario": case.scenario, "controller": case.controller, "law": s.get("controller"),
@@ -389,7 +392,7 @@ def aggregate(rows: list[dict], meta: dict | None = None) -> dict:
         if r["min_margin"] is not None and r["outcome"] not in ("error", "not exercised"):
             f["min_margin"] = r["min_margin"] if f["min_margin"] is None else min(f["min_margin"], r["min_margin"])
     unexpected = [r["id"] for r in rows if not r["documented"]]
-    overload = [r["id"] for r in rows if r["violations"] and (r["explained"] or "").startswith("host overloaded")]
+    overload = [r["id"] for r in rows if r["violations"] and "host overloaded" in (r["explained"] or "")]
     idle = [r["id"] for r in rows if r["outcome"] == "not exercised"]
     errors = [r["id"] for r in rows if r["outcome"] == "error"]
     return {
