@@ -31,7 +31,8 @@ A frame's arrival time is the interface's kernel receive timestamp, so delays, w
 gateway got round to reading it; ``buffer_wait_ms`` (mean/max) is that reading lag.
 
 One thread: `select` on both buses' sockets, drain each ready bus in a batch (non-blocking
-recv until empty, at most BATCH frames), release what is due from a heap, babble when due.
+reads until empty, at most BATCH frames; services/faults/can_ports.py), release what is due
+from a heap, babble when due.
 As `sharedctl fault-relay`, faults act from SIGUSR1 on (``--arm-on-signal``), counters go to
 ``--stats FILE`` at exit, including the gateway's CPU time and the frame rate it handled.
 """
@@ -50,6 +51,7 @@ import can
 
 from ..can_bus import BusSpec, open_bus, resolve
 from ..lifecycle import StopFlag
+from .can_ports import Frame, port_for
 from .impairments import Pipeline
 from .spec import FaultPlan, FaultSpecError, parse, pipeline
 from .zenoh_relay import add_fault_arguments, write_stats
@@ -61,12 +63,12 @@ HEADER = struct.Struct("<HBB")   # arbitration id, flags (bit 0: remote), dlc
 BABBLE_DATA = b"\xba\xbb\x1e\x00\xba\xbb\x1e\x00"
 
 
-def direction(msg: can.Message) -> str | None:
+def direction(frame: Frame) -> str | None:
     """``"command"`` (host→drive), ``"feedback"`` (drive→host) or None (not a CANSimple direction)."""
-    if msg.is_extended_id or msg.is_error_frame:
+    if frame.is_extended or frame.is_error:
         return None
-    cmd = msg.arbitration_id & 0x1F
-    if msg.is_remote_frame:
+    cmd = frame.arbitration_id & 0x1F
+    if frame.is_remote:
         return "command"
     if cmd in COMMAND_CMDS:
         return "command"
@@ -113,7 +115,7 @@ class CanGateway:
     """Forward between `controller_bus` (A) and `robot_bus` (B) with the plan's ``can.*`` faults."""
 
     def __init__(self, controller_bus, robot_bus, plan: FaultPlan) -> None:
-        self.buses = {"controller": controller_bus, "robot": robot_bus}
+        self.buses = {"controller": port_for(controller_bus), "robot": port_for(robot_bus)}
         self.link = plan.links["can"]
         self.streams = {kind: Stream(pipeline(plan, f"can.{kind}", corrupt_skip=HEADER.size))
                         for kind in ("command", "feedback")}
@@ -155,22 +157,13 @@ class CanGateway:
             self._babble(time.monotonic())
 
     def _drain(self, side: str) -> None:
-        bus = self.buses[side]
-        n = 0
-        while n < BATCH:
-            try:
-                msg = bus.recv(0.0)
-            except can.CanError:
-                self.unknown += 1
-                continue
-            if msg is None:
-                break
-            n += 1
-            self._on_frame(side, msg)
+        frames = self.buses[side].read(BATCH)
+        for frame in frames:
+            self._on_frame(side, frame)
         self.batches += 1
-        self.max_batch = max(self.max_batch, n)
+        self.max_batch = max(self.max_batch, len(frames))
 
-    def _on_frame(self, side: str, msg: can.Message) -> None:
+    def _on_frame(self, side: str, msg: Frame) -> None:
         kind = direction(msg)
         if kind is None:
             self.unknown += 1
@@ -180,22 +173,21 @@ class CanGateway:
             return
         stream = self.streams[kind]
         stream.received += 1
-        now = arrival = time.monotonic()
-        if msg.timestamp:     # the interface's receive time: the pipeline sees when the frame arrived
-            wait = max(0.0, time.time() - msg.timestamp)
-            arrival = now - wait
-            stream.wait_sum += wait
-            stream.wait_max = max(stream.wait_max, wait)
+        now = time.monotonic()
+        wait = max(0.0, time.time() - msg.arrival)    # the interface's receive time: when the frame arrived
+        arrival = now - wait
+        stream.wait_sum += wait
+        stream.wait_max = max(stream.wait_max, wait)
         target = self.buses["robot" if kind == "command" else "controller"]
         if self.t0 is None or not selected(self.link.ids, kind, msg.arbitration_id):
             stream.unimpaired += 1
             self._send(stream, target, msg, arrival)
             return
-        packed = HEADER.pack(msg.arbitration_id, 1 if msg.is_remote_frame else 0, msg.dlc) + bytes(msg.data)
+        packed = HEADER.pack(msg.arbitration_id, 1 if msg.is_remote else 0, msg.dlc) + msg.data
         for release, payload in stream.pipe.feed(arrival - self.t0, packed):
             when = self.t0 + release
             if when <= now:
-                self._send(stream, target, _unpack(payload), arrival)
+                self._send(stream, target, payload, arrival)
             else:
                 heapq.heappush(self.heap, (when, next(self.order), kind, payload, arrival))
 
@@ -203,12 +195,17 @@ class CanGateway:
         while self.heap and self.heap[0][0] <= now:
             _, _, kind, payload, arrival = heapq.heappop(self.heap)
             stream = self.streams[kind]
-            self._send(stream, self.buses["robot" if kind == "command" else "controller"], _unpack(payload), arrival)
+            self._send(stream, self.buses["robot" if kind == "command" else "controller"], payload, arrival)
 
-    def _send(self, stream: Stream, bus, msg: can.Message, arrival: float) -> None:
+    def _send(self, stream: Stream, port, frame: Frame | bytes, arrival: float) -> None:
+        """Forward a frame as it came, or send one rebuilt from a pipeline payload (header + data)."""
         try:
-            bus.send(msg)
-        except (can.CanError, OSError, ValueError):
+            if isinstance(frame, Frame):
+                port.forward(frame)
+            else:
+                arbitration_id, flags, dlc = HEADER.unpack_from(frame)
+                port.send(arbitration_id, bool(flags & 1), dlc, frame[HEADER.size:])
+        except (can.CanError, OSError, ValueError, TypeError):
             stream.send_errors += 1
             return
         stream.forwarded += 1
@@ -228,12 +225,11 @@ class CanGateway:
             return
         due = int((t - start) * hz) - self.babble_sent // len(self.buses)
         for _ in range(min(due, BATCH)):
-            msg = can.Message(arbitration_id=can_id, data=BABBLE_DATA, is_extended_id=False)
-            for bus in self.buses.values():
+            for port in self.buses.values():
                 try:
-                    bus.send(msg)
+                    port.send(can_id, False, len(BABBLE_DATA), BABBLE_DATA)
                     self.babble_sent += 1
-                except (can.CanError, OSError):
+                except (can.CanError, OSError, ValueError):
                     self.babble_errors += 1
 
     def report(self) -> dict:
@@ -244,18 +240,13 @@ class CanGateway:
                 "ids": list(self.link.ids),
                 "command": self.streams["command"].report(), "feedback": self.streams["feedback"].report(),
                 "echo_ignored": self.echo_ignored, "unknown": self.unknown, "pending": len(self.heap),
+                "unreadable": sum(port.bad for port in self.buses.values()),
+                "ports": {side: type(port).__name__ for side, port in self.buses.items()},
                 "babble": {"setting": list(self.link.babble) if self.link.babble else None, "sent": self.babble_sent,
                            "errors": self.babble_errors},
                 "batches": self.batches, "max_batch": self.max_batch, "wall_seconds": wall, "cpu_seconds": cpu,
                 "frames_per_s": frames / wall if wall > 0 else None,
                 "cpu_us_per_frame": 1e6 * cpu / frames if frames else None}
-
-
-def _unpack(payload: bytes) -> can.Message:
-    arbitration_id, flags, dlc = HEADER.unpack_from(payload)
-    remote = bool(flags & 1)
-    return can.Message(arbitration_id=arbitration_id, is_extended_id=False, is_remote_frame=remote,
-                       dlc=dlc, data=None if remote else payload[HEADER.size:])
 
 
 # ----- the command ---------------------------------------------------------------

