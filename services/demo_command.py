@@ -200,8 +200,8 @@ def run(args) -> int:
     summary["ok"] = bool(failure is None and clean and result["violations"] == 0 and result["truth_samples"] > 0
                          and result["estops"] == 0)   # an estop means the scenario did not run
     if not faults.empty:   # intended faults: judged as services/faults/stack.py says
-        summary.update(faults=faults.plan.specs, injected=faults.report(),
-                       ok=faults.judge(summary, children, result, failure))
+        summary.update(faults=faults.plan.specs, injected=faults.report())
+        summary["ok"] = faults.judge(summary, children, result, failure)
     _report(summary, args, children, log_dir)
     return 0 if summary["ok"] else 1
 

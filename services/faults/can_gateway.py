@@ -50,6 +50,7 @@ from pathlib import Path
 import can
 
 from ..can_bus import BusSpec, open_bus, resolve
+from ..controller.priority import make_loop_realtime
 from ..lifecycle import StopFlag
 from .can_ports import Frame, port_for
 from .impairments import Pipeline
@@ -129,6 +130,7 @@ class CanGateway:
         self.babble_errors = 0
         self.batches = 0
         self.max_batch = 0
+        self.realtime = False
         self.started = time.monotonic()
         self.cpu_start = time.process_time()
 
@@ -237,6 +239,7 @@ class CanGateway:
         cpu = time.process_time() - self.cpu_start
         frames = sum(s.received for s in self.streams.values())
         return {"kind": "can-gateway", "armed": self.t0 is not None, "armed_wall": self.armed_wall,
+                "realtime": self.realtime,
                 "ids": list(self.link.ids),
                 "command": self.streams["command"].report(), "feedback": self.streams["feedback"].report(),
                 "echo_ignored": self.echo_ignored, "unknown": self.unknown, "pending": len(self.heap),
@@ -266,6 +269,8 @@ def add_parser(subparsers) -> None:
     p.add_argument("--stats", metavar="FILE", help="write the counters as JSON here at exit (default: stdout)")
     p.add_argument("--ready", metavar="FILE", help="create FILE once both buses are open")
     p.add_argument("--duration", type=float, metavar="S", help="exit after S seconds (a backstop)")
+    p.add_argument("--realtime", action="store_true",
+                   help="SCHED_FIFO like the controller's loop (it is in the torque loop's path), if permitted")
     p.set_defaults(handler=run)
 
 
@@ -298,6 +303,7 @@ def run(args) -> int:
         print(f"sharedctl fault-gateway: cannot open the buses: {exc}", file=sys.stderr)
         return 1
     gateway = CanGateway(buses[0], buses[1], plan)
+    gateway.realtime = make_loop_realtime() if args.realtime else False
     signal.signal(signal.SIGUSR1, lambda *_: gateway.arm())
     if not args.arm_on_signal:
         gateway.arm()

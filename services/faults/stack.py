@@ -16,11 +16,13 @@ the demo is exactly the unimpaired one.
 Faults act from the run's start on: the relay and gateway forward unimpaired until the demo
 sends them SIGUSR1, so every run starts the same way.
 
-How a run with intended faults is judged (``ok``): the run started (the operator got control),
-the simulator's ground truth shows 0 violations and was recorded, the relay/gateway stayed up,
-and every process that was not deliberately killed exited cleanly (exit 0 on SIGTERM). An
-emergency stop caused by a fault is the safety policy working: it is reported (``estops``),
-not a failure. A killed child's non-zero exit is an intended outcome.
+How a run with intended faults is judged (``ok``): the run started (the operator got control,
+and no emergency stop came before the faults were armed), the simulator's ground truth shows
+0 violations and was recorded, the relay/gateway stayed up and exited cleanly, and every
+process that was not deliberately killed exited cleanly (exit 0 on SIGTERM). An emergency
+stop during the run is the safety policy answering a fault: reported (``estops``), not a
+failure. A killed child's non-zero exit is an intended outcome. The reasons against ``ok``
+are listed in ``injected.not_ok``.
 """
 from __future__ import annotations
 
@@ -114,9 +116,10 @@ class FaultStack:
             self.stats_files["gateway"] = stats
             self.infra["gateway"] = start_child("fault-gateway", [
                 "fault-gateway", "--controller-port", str(self.can_ports[0]), "--robot-port", str(self.can_ports[1]),
-                *self.fault_argv(), "--stats", str(stats), "--ready", str(ready), "--duration", backstop], log_dir)
-            # in the torque loop's path: the priority of the controller and the robot (nice −10) when allowed;
-            # at normal priority on an overloaded host, frames were measured waiting ~200 ms in its buffer
+                *self.fault_argv(), "--stats", str(stats), "--ready", str(ready), "--duration", backstop,
+                "--realtime"], log_dir)
+            # in the torque loop's path: the controller's priority (nice −10, SCHED_FIFO) when allowed; at
+            # normal priority on an overloaded host frames were measured waiting ~200 ms in its buffer
             self.gateway_priority = raise_priority(self.infra["gateway"].popen.pid)
             deadline = time.monotonic() + READY_TIMEOUT
             while not ready.exists():
@@ -226,11 +229,21 @@ class FaultStack:
         return out
 
     def judge(self, summary: dict, children: dict, result: dict, failure: str | None) -> bool:
-        """``ok`` under intended faults (see the module docstring)."""
-        unintended = [c for name, c in children.items() if name not in self.killed and not c.clean]
-        infra_clean = all(c.clean for c in self.infra.values())
-        return bool(failure is None and not unintended and infra_clean and result["violations"] == 0
-                    and result["truth_samples"] > 0)
+        """``ok`` under intended faults (see the module docstring); the reasons against go to
+        ``summary["injected"]["not_ok"]``."""
+        reasons = [failure] if failure else []
+        reasons += [f"{c.name} exited {c.exit_code}" + (" (SIGKILL after the stop timeout)" if c.killed else "")
+                    for name, c in children.items() if name not in self.killed and not c.clean]
+        reasons += [f"fault {name} exited {c.exit_code}" for name, c in self.infra.items() if not c.clean]
+        if result["violations"]:
+            reasons.append(f"{result['violations']} ground-truth violations")
+        if not result["truth_samples"]:
+            reasons.append("no ground truth recorded")
+        early = [e for e in result.get("event_log", []) if e["kind"] == "estop" and e["t"] < 0]
+        if early:   # before the faults were armed: not a fault's doing, the run never started
+            reasons.append(f"emergency stop before the run started (t={early[0]['t']} s): {early[0]['text']}")
+        summary.setdefault("injected", {})["not_ok"] = reasons
+        return not reasons
 
 
 def _with_rates(stats: dict) -> dict:

@@ -22,7 +22,7 @@ def test_demo_with_faults_reports_what_was_injected(tmp_path):
     proc = subprocess.run(argv, capture_output=True, timeout=120)
     summary = json.loads(out.read_text())
     assert summary["faults"] == FAULTS
-    assert summary["ok"] is True and proc.returncode == 0, proc.stderr.decode()[-2000:]
+    assert summary["injected"]["not_ok"] == [] and summary["ok"] is True and proc.returncode == 0, proc.stderr.decode()[-2000:]
     assert summary["violations"] == 0 and summary["truth_samples"] > 0
 
     injected = summary["injected"]
