@@ -24,7 +24,7 @@ such as ``50%``; every key may be given once, except the windows, which add up):
 ``can.ids=feedback|command|all|0x0E[,0x2E…]`` (which frames the impairments touch; default
 all), ``can.busoff=START,DURATION`` (the gateway forwards nothing: repeatable) and
 ``can.babble=HZ[,ID[,START,DURATION]]`` (a flood of ID, default 0x000, the highest priority,
-at HZ frames/s on both buses; for the whole run unless a window is given).
+at HZ ≤ 5000 frames/s on both buses; for the whole run unless a window is given).
 
 Process faults: ``controller|console|robot.kill_at=SEC`` (SIGKILL), ``….stop_at=SEC,DURATION``
 (SIGSTOP, SIGCONT DURATION later), ``controller.restart_at=SEC`` (a fresh controller, after a
@@ -47,6 +47,7 @@ DEFAULT_REORDER_GAP_MS = 50.0
 DEFAULT_REPLAY_AGE_MS = 500.0
 DEFAULT_RATE_QUEUE = 1000
 DEFAULT_BABBLE_ID = 0x000
+MAX_BABBLE_HZ = 5000.0     # the gateway sends it at SCHED_FIFO on both buses: bounded so it cannot take a core
 
 
 class FaultSpecError(ValueError):
@@ -192,7 +193,7 @@ def _set_link(spec: str, link: LinkFaults, stream: str, key: str, value: str) ->
         parts = _parts(spec, value, 1, 4, "HZ[,ID[,START,DURATION]]")
         if len(parts) == 3:
             raise FaultSpecError(spec, "a babble window needs both START and DURATION")
-        hz = _number(spec, parts[0], "HZ", 1.0, 20_000.0)
+        hz = _number(spec, parts[0], "HZ", 1.0, MAX_BABBLE_HZ)
         can_id = _can_id(spec, parts[1]) if len(parts) > 1 else DEFAULT_BABBLE_ID
         start, duration = _window(spec, ",".join(parts[2:])) if len(parts) == 4 else (0.0, math.inf)
         link.babble = (hz, can_id, start, duration)

@@ -12,6 +12,9 @@ path between the console and the controller with two sessions:
 * telemetry direction (controller → console): ``…/state``, ``…/events`` and ``…/alive/*``
   through the ``telemetry.*`` pipeline.
 
+Liveliness tokens are not mirrored (no process of this project watches them through the relay
+today); the periodic ``alive`` heartbeats are.
+
 Each session subscribes with ``allowed_origin=REMOTE`` and only republishes on the *other*
 session, so the relay never hears its own publications. The ground-truth stream and the
 demo's own measurements do not pass through the relay.

@@ -71,6 +71,7 @@ def test_seed_from_the_option_or_a_spec():
     ("operator.busoff=1,2", "busoff"),
     ("can.ids=0x900", "0x900"),
     ("can.babble=100,0x1,2", "START and DURATION"),
+    ("can.babble=10000", "10000"),
     ("console.restart_at=3", "console.restart_at"),
     ("controller.restart_at=3", "kill_at"),
     ("operator.loss", "KEY=VALUE"),
