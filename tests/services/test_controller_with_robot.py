@@ -126,9 +126,10 @@ def test_controller_drives_the_simulated_robot_estops_when_it_goes_silent_and_st
     assert not states[-1].estop_active
     # hands off (silent operator): u_s = 0 in the safe set, the robot rolls to rest on wheel friction
     wait_for(lambda: np.linalg.norm(truths[-1].qd) < 1e-3 and np.linalg.norm(states[-1].qd_hat) < 1e-3, 10.0, "rest")
+    wait_for(lambda: states[-1].lease_holder is None, 2.0, "the silent operator's lease to expire (1 s)")
     time.sleep(0.1)
     s = states[-1]
-    assert s.authority.value == "human" and s.lease_holder is None and s.link.staleness_ms > 300
+    assert s.authority.value == "human" and s.lease_holder is None and s.link.staleness_ms > 1000
     np.testing.assert_allclose(s.q, truths[-1].q, atol=0.005)        # odometry vs ground truth, at rest
     assert s.link.can_feedback_age_ms < 50
 
