@@ -38,6 +38,7 @@ from . import lease_queries
 from .can_master import CanMaster
 from .lease import DEFAULT_EXPIRY, LeaseMode, OperatorLease
 from .odometry import WheelOdometry, feedback_ages
+from .phase import SensorPhaseLock, estimates_arrival
 from .operator_input import OperatorInputPolicy
 from .replay_guard import DEFAULT_MAX_AGE, ReplayGuard
 from .telemetry import EventLimiter, Link, robot_state
@@ -64,6 +65,7 @@ class DaemonConfig:
     event_interval: float = 1.0         # s between events of one topic
     verbose: bool = True                # warnings and errors to stderr
     realtime: bool = False              # the loop thread asks for SCHED_FIFO (priority.py)
+    sensor_sync: bool = False           # lock the tick phase to the wheel estimates' arrival (phase.py)
     lease_mode: str = LeaseMode.IMPLICIT  # implicit: a command takes a free lease; explicit: only a take (lease.py)
     lease_expiry: float = DEFAULT_EXPIRY  # s without commands/takes from the holder → lease free
     max_command_age: float = DEFAULT_MAX_AGE  # s later than the session's best delivery → stale (replay_guard.py)
@@ -173,6 +175,7 @@ class ControllerDaemon:
         self.compute = LatenessHistogram()       # tick compute time (control + telemetry)
         self.late = 0
         self.realtime = False
+        self.phase_lock = SensorPhaseLock(self.period) if config.sensor_sync else None
         self._declare(session)
 
     # ------------------------------------------------------------------ Zenoh
@@ -252,6 +255,8 @@ class ControllerDaemon:
                     self.publish_heartbeat()
                 ticks += 1
                 self.compute.add(time.monotonic() - now)
+                if self.phase_lock is not None and (arrival := estimates_arrival(self.master.estimates())) is not None:
+                    clock.next += self.phase_lock.correction(clock.next, arrival)
                 self.master.receive_until(clock.next - 2e-4)
         finally:
             self.shutdown()
