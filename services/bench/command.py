@@ -3,12 +3,14 @@
     control_step_us.{ce,nce,of}.{median,p99}          SharedController.step (control_step.py)
     loop.{rate_hz,deadline_misses,jitter_p99_us}       500 Hz over CAN with the simulated robot (stack_run.py)
     loop_1khz.{…}                                      the same at 1 kHz
+    loop_sensor_sync.{…}                               500 Hz with the controller's --sensor-sync
     latency.{sensor_to_torque_us,operator_to_torque_us,zenoh_floor_us,can_floor_us}.{p50,p99}
     batched_sim.{robots,steps_per_s,scalar_steps_per_s,speedup_vs_scalar}   (batched.py)
     bus_load.fraction_1mbit                            frames seen on the bus, worst-case stuffing
     cpu.fraction_of_one_core                           robot + controller at 500 Hz
     machine.{cpu,cores,kernel,python,loadavg_before,loadavg_after}
 
+--markdown OUT writes the same as tables (docs/performance/bench.md); --from-json IN re-renders a saved run.
 --quick: 15 s at 500 Hz, 8 s at 1 kHz, shorter step trajectories (under 3 minutes); the full run:
 60 s and 20 s, plus the step's breakdown, floors, profile and scaling with the number of groups.
 Targets are reported, never enforced: timing depends on the machine and its load.
@@ -40,6 +42,8 @@ def add_parser(subparsers) -> None:
     p = subparsers.add_parser("bench", help="measure step cost, loop timing, latency, bus load, CPU and the batched simulator")
     p.add_argument("--quick", action="store_true", help="shorter runs (under 3 minutes)")
     p.add_argument("--json", metavar="OUT", help="write the figures as JSON to OUT")
+    p.add_argument("--markdown", metavar="OUT", help="write the figures as Markdown tables to OUT")
+    p.add_argument("--from-json", metavar="IN", help="no measurement: render IN (a --json report) as the table / Markdown")
     p.add_argument("--skip-stack", action="store_true", help="no processes: only the step and the batched simulator")
     p.set_defaults(handler=run)
 
@@ -106,13 +110,37 @@ def collect(quick: bool, skip_stack: bool = False, progress=print) -> dict:
         report["cpu"] = run500["cpu"]
         report["loop_1khz"] = dict(run1k["loop"], sensor_to_torque_us=run1k["latency"]["sensor_to_torque_us"],
                                    bus_load=run1k["bus_load"], cpu=run1k["cpu"])
-        report["stack"] = {"500hz": {k: run500[k] for k in ("processes", "robot_priority", "log_dir")},
-                           "1khz": {k: run1k[k] for k in ("processes", "robot_priority", "log_dir")}}
+        progress(f"stack at 500 Hz, ticks locked to the wheel estimates (--sensor-sync), for {seconds_1k:g} s …")
+        sync = stack_run.run(500.0, seconds_1k, probes=False, controller_args=("--sensor-sync",))
+        report["loop_sensor_sync"] = dict(sync["loop"], sensor_to_torque_us=sync["latency"]["sensor_to_torque_us"],
+                                          operator_to_torque_us=sync["latency"]["operator_to_torque_us"])
+        report["stack"] = {name: {k: r[k] for k in ("processes", "robot_priority", "log_dir")}
+                           for name, r in (("500hz", run500), ("1khz", run1k), ("500hz_sensor_sync", sync))}
     progress("batched simulator …")
     report["batched_sim"] = batched(quick)
     report["machine"]["loadavg_after"] = _loadavg()
+    report["ratios"] = ratios(report)
     report["targets"] = check_targets(report)
     return report
+
+
+def ratios(report: dict) -> dict:
+    """Figures over the floor they stand on, measured in the same run (None where one is missing)."""
+    def over(a, b):
+        x, y = lookup(report, a), lookup(report, b)
+        ok = all(isinstance(v, (int, float)) and math.isfinite(v) and v > 0 for v in (x, y))
+        return x / y if ok else None
+
+    return {
+        "sensor_to_torque_over_can_floor_p50": over("latency.sensor_to_torque_us.p50", "latency.can_floor_us.p50"),
+        "operator_to_torque_over_zenoh_floor_p50": over("latency.operator_to_torque_us.p50", "latency.zenoh_floor_us.p50"),
+        "ce_step_over_nce_step": over("control_step_us.ce.median", "control_step_us.nce.median"),
+        "of_step_over_ce_step": over("control_step_us.of.median", "control_step_us.ce.median"),
+        "ce_step_in_numpy_calls": over("control_step_us.ce.median", "control_step_detail.floors_ns.numpy_ufunc_3_ns") and
+        over("control_step_us.ce.median", "control_step_detail.floors_ns.numpy_ufunc_3_ns") * 1e3,
+        "ce_step_over_period_500hz": (lookup(report, "control_step_us.ce.median") or math.nan) / 2000.0,
+        "loop_1khz_rate_over_target": (lookup(report, "loop_1khz.rate_hz") or math.nan) / 1000.0,
+    }
 
 
 def lookup(report: dict, dotted: str):
@@ -154,7 +182,9 @@ def table(report: dict):
 
     rows = [f"control_step_us.{law}.{s}" for law in control_step.LAWS for s in ("median", "p99")]
     rows += ["loop.rate_hz", "loop.deadline_misses", "loop.jitter_p99_us", "loop_1khz.rate_hz",
-             "loop_1khz.deadline_misses", "loop_1khz.jitter_p99_us"]
+             "loop_1khz.deadline_misses", "loop_1khz.jitter_p99_us", "loop_sensor_sync.deadline_misses",
+             "loop_sensor_sync.jitter_p99_us", "loop_sensor_sync.sensor_to_torque_us.p50",
+             "loop_sensor_sync.sensor_to_torque_us.p99"]
     rows += [f"latency.{k}.{s}" for k in ("sensor_to_torque_us", "operator_to_torque_us", "zenoh_floor_us", "can_floor_us")
              for s in ("p50", "p99")]
     rows += ["batched_sim.robots", "batched_sim.steps_per_s", "batched_sim.scalar_steps_per_s",
@@ -172,7 +202,10 @@ def run(args) -> int:
     from rich.console import Console
 
     console = Console(stderr=False)
-    report = collect(args.quick, args.skip_stack, progress=lambda text: console.print(f"[dim]{text}"))
+    if args.from_json:
+        report = json.loads(Path(args.from_json).read_text())
+    else:
+        report = collect(args.quick, args.skip_stack, progress=lambda text: console.print(f"[dim]{text}"))
     console.print(table(report))
     reason = lookup(report, "batched_sim.reason")
     if reason:
@@ -181,6 +214,12 @@ def run(args) -> int:
         Path(args.json).parent.mkdir(parents=True, exist_ok=True)
         Path(args.json).write_text(json.dumps(finite_or_null(report), indent=2, default=str, allow_nan=False) + "\n")
         console.print(f"[dim]wrote {args.json}")
+    if args.markdown:
+        from .markdown import render
+
+        Path(args.markdown).parent.mkdir(parents=True, exist_ok=True)
+        Path(args.markdown).write_text(render(finite_or_null(report)))
+        console.print(f"[dim]wrote {args.markdown}")
     return 0
 
 

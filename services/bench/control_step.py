@@ -69,8 +69,10 @@ def step_times(law: str, seconds: float, repeats: int) -> dict:
     times = np.concatenate([r[0] for r in runs])
     engaged = np.concatenate([r[1] for r in runs])
     head = percentiles(times[engaged])
+    cpu, cpu_engaged = _run(loop, q0, controller, inputs, clock=time.thread_time_ns)   # CPU time: what load does not add
     return {
         "median": head["median"], "p99": head["p99"], "steps": int(engaged.sum()),
+        "thread_cpu_median": float(np.median(cpu[cpu_engaged])) if cpu_engaged.any() else None,
         "all": _brief(percentiles(times)), "operator_only": _brief(percentiles(times[~engaged])),
     }
 

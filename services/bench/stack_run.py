@@ -110,7 +110,8 @@ def _command(counter: int, session_id: str, sign: float) -> OperatorCommand:
     )
 
 
-def run(rate_hz: float, seconds: float, log_dir: Path | None = None, probes: bool = True) -> dict:
+def run(rate_hz: float, seconds: float, log_dir: Path | None = None, probes: bool = True,
+        controller_args: tuple[str, ...] = ()) -> dict:
     """Start the stack at `rate_hz` for `seconds` of measurement; returns the figures (see module doc)."""
     log_dir = Path(log_dir or tempfile.mkdtemp(prefix="sharedctl-bench-"))
     can_port, probe_port = children.free_udp_port(), children.free_udp_port()
@@ -134,7 +135,7 @@ def run(rate_hz: float, seconds: float, log_dir: Path | None = None, probes: boo
         robot_priority = children.raise_priority(robot.popen.pid)
         controller = children.start_child("controller", [
             "controller", "--scenario", SCENARIO, *can_args, "--zenoh-listen", z_ctrl, "--robot-id", ROBOT_ID,
-            "--rate", f"{rate_hz:g}", "--duration", f"{total:.1f}", "--quiet"], log_dir)
+            "--rate", f"{rate_hz:g}", "--duration", f"{total:.1f}", "--quiet", *controller_args], log_dir)
         started.append(controller)
         for child, endpoint in ((robot, z_robot), (controller, z_ctrl)):
             if not children.wait_listening(endpoint, child, 20.0):
@@ -223,7 +224,9 @@ def _daemon_summary(controller: children.Child) -> dict:
     if not match:
         return {}
     g = match.groupdict()
-    return {"ticks": int(g["ticks"]), "rate_hz": float(g["rate"]), "missed": int(g["missed"]), "late": int(g["late"]),
+    estops = re.search(r"estops (\d+)", controller.tail(40))
+    return {"estops": int(estops.group(1)) if estops else None, "ticks": int(g["ticks"]),
+            "rate_hz": float(g["rate"]), "missed": int(g["missed"]), "late": int(g["late"]),
             "lateness_p50_us": float(g["j50"]) * 1e3, "lateness_p99_us": float(g["j99"]) * 1e3,
             "lateness_max_us": float(g["jmax"]) * 1e3, "compute_p50_us": float(g["c50"]) * 1e3,
             "compute_p99_us": float(g["c99"]) * 1e3, "cpu_percent": int(g["cpu"])}

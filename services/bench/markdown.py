@@ -1,0 +1,93 @@
+"""A bench report (the JSON of `sharedctl bench --json`) as Markdown tables, for docs/performance/."""
+from __future__ import annotations
+
+import math
+
+
+def _fmt(value, digits: int = 3) -> str:
+    if value is None or (isinstance(value, float) and not math.isfinite(value)):
+        return "—"
+    if isinstance(value, bool):
+        return "yes" if value else "no"
+    if isinstance(value, float):
+        return f"{value:,.{digits}g}" if abs(value) < 100 else f"{value:,.0f}"
+    return str(value)
+
+
+def _get(report: dict, dotted: str):
+    node = report
+    for part in dotted.split("."):
+        if not isinstance(node, dict) or part not in node:
+            return None
+        node = node[part]
+    return node
+
+
+def render(report: dict) -> str:
+    m = report.get("machine", {})
+    out = [
+        f"# sharedctl bench{' --quick' if report.get('quick') else ''} — {report.get('started', '?')}",
+        "",
+        f"Machine: {m.get('cpu')}, {m.get('cores')} cores, kernel {m.get('kernel')}, Python {m.get('python')}, "
+        f"numpy {m.get('numpy')}; load average (1, 5, 15 min) before {m.get('loadavg_before')}, after {m.get('loadavg_after')}.",
+        "",
+        "## Targets",
+        "",
+        "| figure | measured | target | met |",
+        "|---|---:|---|---|",
+    ]
+    for key, t in report.get("targets", {}).items():
+        out.append(f"| `{key}` | {_fmt(t.get('value'))} | {t.get('target')} | {_fmt(t.get('met'))} |")
+    out += ["", "## Control step (µs; machine law engaged — operator-only steps and all steps beside)", "",
+            "| law | median | p99 | thread-CPU median | all steps median | operator-only median |", "|---|---:|---:|---:|---:|---:|"]
+    for law, s in (report.get("control_step_us") or {}).items():
+        out.append(f"| {law} | {_fmt(s.get('median'))} | {_fmt(s.get('p99'))} | {_fmt(s.get('thread_cpu_median'))} | "
+                   f"{_fmt(_get(s, 'all.median'))} | {_fmt(_get(s, 'operator_only.median'))} |")
+    detail = report.get("control_step_detail") or {}
+    if detail.get("breakdown_us"):
+        out += ["", "Parts of one engaged CE step (µs, median of repeated calls):", "", "| part | µs |", "|---|---:|"]
+        out += [f"| {k} | {_fmt(v)} |" for k, v in detail["breakdown_us"].items()]
+    if detail.get("floors_ns"):
+        out += ["", "Floors (ns per call, least batch mean):", "", "| operation | ns |", "|---|---:|"]
+        out += [f"| {k.removesuffix('_ns')} | {_fmt(v)} |" for k, v in detail["floors_ns"].items()]
+    if detail.get("scaling_groups"):
+        out += ["", "Step against the number of constraint groups (CE, all steps):", "",
+                "| groups | median µs | p99 µs | engaged fraction |", "|---:|---:|---:|---:|"]
+        out += [f"| {r['groups']} | {_fmt(r['median_us'])} | {_fmt(r['p99_us'])} | {_fmt(r['engaged_fraction'])} |"
+                for r in detail["scaling_groups"]]
+    if detail.get("profile"):
+        out += ["", "Profile (cProfile, CE along the trajectory, by own time):", "", "```", detail["profile"], "```"]
+    out += ["", "## Loop, latency, bus, CPU", "", "| figure | 500 Hz | 1 kHz | 500 Hz, --sensor-sync |", "|---|---:|---:|---:|"]
+    runs = ("loop", "loop_1khz", "loop_sensor_sync")
+    for key in ("rate_hz", "deadline_misses", "jitter_p50_us", "jitter_p99_us", "periods_without_torque_on_bus"):
+        out.append(f"| loop {key} | " + " | ".join(_fmt(_get(report, f"{r}.{key}")) for r in runs) + " |")
+    for key in ("missed", "late", "estops", "lateness_p99_us", "compute_p50_us", "compute_p99_us"):
+        out.append(f"| daemon {key} | " + " | ".join(_fmt(_get(report, f"{r}.daemon.{key}")) for r in runs) + " |")
+    sensor = ("latency.sensor_to_torque_us", "loop_1khz.sensor_to_torque_us", "loop_sensor_sync.sensor_to_torque_us")
+    out.append("| sensor → torque p50 / p99 µs | " + " | ".join(
+        f"{_fmt(_get(report, s + '.p50'))} / {_fmt(_get(report, s + '.p99'))}" for s in sensor) + " |")
+    out.append(f"| operator → torque p50 / p99 µs | {_fmt(_get(report, 'latency.operator_to_torque_us.p50'))} / "
+               f"{_fmt(_get(report, 'latency.operator_to_torque_us.p99'))} | | "
+               f"{_fmt(_get(report, 'loop_sensor_sync.operator_to_torque_us.p50'))} / "
+               f"{_fmt(_get(report, 'loop_sensor_sync.operator_to_torque_us.p99'))} |")
+    for key in ("zenoh_floor_us", "can_floor_us"):
+        out.append(f"| {key.removesuffix('_us').replace('_', ' ')} p50 / p99 µs | {_fmt(_get(report, f'latency.{key}.p50'))} / "
+                   f"{_fmt(_get(report, f'latency.{key}.p99'))} | | |")
+    out.append(f"| bus load (1 Mbit/s, worst-case stuffing) | {_fmt(_get(report, 'bus_load.fraction_1mbit'))} | "
+               f"{_fmt(_get(report, 'loop_1khz.bus_load.fraction_1mbit'))} | |")
+    out.append(f"| CPU, robot + controller (fraction of one core) | {_fmt(_get(report, 'cpu.fraction_of_one_core'))} | "
+               f"{_fmt(_get(report, 'loop_1khz.cpu.fraction_of_one_core'))} | |")
+    per = _get(report, "cpu.per_process") or {}
+    if per:
+        out.append(f"| CPU per process at 500 Hz | {', '.join(f'{k} {_fmt(v)}' for k, v in per.items())} | | |")
+    b = report.get("batched_sim") or {}
+    out += ["", "## Batched simulator", "", "| robots | robot-steps/s | scalar steps/s | speed-up |", "|---:|---:|---:|---:|",
+            f"| {_fmt(b.get('robots'))} | {_fmt(b.get('steps_per_s'))} | {_fmt(b.get('scalar_steps_per_s'))} | "
+            f"{_fmt(b.get('speedup_vs_scalar'))} |"]
+    if b.get("reason"):
+        out += ["", f"Not measured: {b['reason']}"]
+    r = report.get("ratios") or {}
+    if r:
+        out += ["", "## Ratios (same run)", "", "| ratio | value |", "|---|---:|"]
+        out += [f"| {k} | {_fmt(v)} |" for k, v in r.items()]
+    return "\n".join(out) + "\n"
