@@ -254,9 +254,7 @@ class CanGateway:
 
 # ----- the command ---------------------------------------------------------------
 def add_parser(subparsers) -> None:
-    import argparse
-
-    p = subparsers.add_parser("fault-gateway", help=argparse.SUPPRESS,
+    p = subparsers.add_parser("fault-gateway", help="CAN gateway that injects can.* faults (demo --fault)",
                               description="CAN gateway between the controller's and the robot's bus that "
                                           "impairs the forwarded frames (can.* faults).")
     p.add_argument("--interface", default="udp_multicast", help="udp_multicast (default) or socketcan")
