@@ -1,0 +1,121 @@
+"""sharing.arbitrate for a whole batch: the Schmitt trigger k_s with its minimum machine dwell,
+the law-level trigger, group selection and the blend k_h of (46)/(47) (docs/control.md §6).
+
+The arbiter's memory is one array per field of sharing.ArbiterState; a group of −1 stands for
+None. Each rule below is the scalar rule written over the batch, in the same order.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..sharing import Authority, LawRole, Mode, SharingParameters
+from .geometry import HAZARD, SAFE, GroupTable, Situation
+
+HUMAN, SHARED, MACHINE = int(Authority.HUMAN), int(Authority.SHARED), int(Authority.MACHINE)
+TRACKING, HAZARD_LAW = int(LawRole.TRACKING), int(LawRole.HAZARD)
+
+
+@dataclass
+class ArbiterArrays:
+    """sharing.ArbiterState per robot, arrays of shape (N,)."""
+
+    latched: np.ndarray
+    group: np.ndarray
+    role: np.ndarray
+    k_h: np.ndarray
+    machine_time: np.ndarray
+    switches: np.ndarray
+    group_switches: np.ndarray
+
+    @staticmethod
+    def initial(params: SharingParameters, N: int) -> "ArbiterArrays":
+        machine = params.mode is Mode.MACHINE
+        return ArbiterArrays(
+            np.full(N, machine), np.full(N, -1), np.full(N, TRACKING), np.full(N, 0.0 if machine else 1.0),
+            np.zeros(N), np.zeros(N, dtype=np.int64), np.zeros(N, dtype=np.int64),
+        )
+
+    def take(self, index) -> "ArbiterArrays":
+        return ArbiterArrays(*(getattr(self, f)[index] for f in self.__dataclass_fields__))
+
+
+@dataclass
+class Decisions:
+    """sharing.Decision per robot."""
+
+    authority: np.ndarray
+    group: np.ndarray
+    role: np.ndarray
+    k_h: np.ndarray
+    k_f: np.ndarray
+    overall: np.ndarray
+    group_changed: np.ndarray
+    role_changed: np.ndarray
+
+    def __post_init__(self):
+        # u_s = w_h u_h + w_f u_f: (1, 0) for HUMAN, (0, 1) for MACHINE, (k_h, k_f) for SHARED
+        human, machine = self.authority == HUMAN, self.authority == MACHINE
+        self.human_weight = np.where(human, 1.0, np.where(machine, 0.0, self.k_h))[None]
+        self.machine_weight = np.where(human, 0.0, np.where(machine, 1.0, self.k_f))[None]
+
+
+def arbitrate(table: GroupTable, params: SharingParameters, state: ArbiterArrays, situation: Situation,
+              row_x: np.ndarray, missed: np.ndarray, chosen: np.ndarray, intent: np.ndarray, dt: float):
+    """One sample of the sharing function for every robot; returns (new state, decisions).
+
+    `row_x` (P, N) is k q + t of every distinct row, `missed` (G, N) the hazardous rows each group
+    misses and `chosen` (N,) the result of select_group for this sample.
+    """
+    N = intent.size
+    overall = situation.overall
+    mode = params.mode
+    if mode is Mode.HUMAN:
+        none = np.full(N, -1)
+        return state, Decisions(np.full(N, HUMAN), none, np.full(N, TRACKING), np.ones(N), np.zeros(N), overall,
+                                np.zeros(N, bool), np.zeros(N, bool))
+    hazard = overall == HAZARD
+    safe = overall == SAFE
+    arange = np.arange(N)
+
+    # k_s: the Schmitt trigger
+    before = state.latched
+    machine_time = np.where(before, state.machine_time + dt, 0.0)
+    if mode is Mode.MACHINE:
+        latched = np.ones(N, bool)
+    else:
+        machine_time = np.where(hazard & ~before, 0.0, machine_time)
+        latched = (before | hazard) & ~(safe & (machine_time >= params.min_machine_dwell))
+    switches = state.switches + ((latched != before) & (mode is Mode.SHARED))
+
+    # law role, with the law-level trigger: back to tracking when safe and clear of the faces
+    old = state.group
+    has_old = old >= 0
+    old_x = row_x[table.group_rows[np.where(has_old, old, 0)], arange[:, None]]   # (N, n)
+    clear = ~has_old | np.all(old_x <= -params.bands.b1, axis=1)
+    role = np.where(hazard, HAZARD_LAW, state.role)
+    role = np.where((state.role == HAZARD_LAW) & safe & clear, TRACKING, role)
+
+    # group: keep it unless it stopped applying or covering the hazardous rows
+    if mode is Mode.MACHINE:
+        needs = np.ones(N, bool)
+    else:
+        needs = latched
+    old_safe = np.where(has_old, old, 0)
+    applies = situation.containing[table.region_of[old_safe], arange]
+    stale = ~has_old | (latched & ~before) | ~applies | (missed[old_safe, arange] > 0)
+    group = np.where(needs & stale & (chosen >= 0), chosen, old)
+    group_changed = group != old
+
+    # weights
+    machine = np.full(N, mode is Mode.MACHINE) | hazard
+    target = 1.0 - np.exp(-np.maximum(intent, 0.0))
+    blend = state.k_h + (target - state.k_h) * (1.0 - math.exp(-dt / params.blend_time_constant))
+    k_h = np.where(~latched, 1.0, np.where(machine, 0.0, blend))
+    authority = np.where(~latched, HUMAN, np.where(machine, MACHINE, SHARED))
+
+    new = ArbiterArrays(latched, group, role, k_h, np.where(latched, machine_time, 0.0), switches,
+                        state.group_switches + (group_changed & has_old))
+    return new, Decisions(authority, group, role, k_h, 1.0 - k_h, overall, group_changed, role != state.role)

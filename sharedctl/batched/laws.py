@@ -1,0 +1,218 @@
+"""The machine laws of sharedctl/controllers/ for a batch of robots, each on its own group.
+
+Every function takes the robots' own group matrices gathered per robot — K, T, K⁻¹ of shape
+(n, n, M) / (n, M) — and component-major signals (n, M), and returns what the scalar law's
+`evaluate` returns: u_f, θ̂̇ and the law state's rate. The formulas (and their order of
+operations) are those of the scalar laws:
+
+* (12) certainty equivalent: u_f = −K_p p − Kᵀ(z/x) + Y θ̂, θ̂̇ = −Yᵀp/γ_θ;
+* (13)–(15) non-certainty equivalent, state [p_n, W_n];
+* (25)–(29) output feedback, state [z_f, ξ];
+* (40) the velocity observer on q, state [q̂, β_o].
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..controllers import CertaintyEquivalentLaw, NonCertaintyEquivalentLaw, OutputFeedbackLaw, VelocityObserver
+from ..controllers.base import diag_gain
+from . import plant
+from .geometry import saturate
+
+
+def matvec(A: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """A x per robot: A (i, j, M), x (j, M) → (i, M)."""
+    return np.einsum("ijm,jm->im", A, x)
+
+
+def rmatvec(A: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """Aᵀ x per robot: A (i, j, M), x (i, M) → (j, M)."""
+    return np.einsum("ijm,im->jm", A, x)
+
+
+@dataclass(frozen=True)
+class GroupFrame:
+    """The active group of each robot: K, T, K⁻¹ (n, n, M) / (n, M)."""
+
+    K: np.ndarray
+    T: np.ndarray
+    K_inv: np.ndarray
+
+    def take(self, index) -> "GroupFrame":
+        return GroupFrame(self.K[..., index], self.T[..., index], self.K_inv[..., index])
+
+
+@dataclass(frozen=True)
+class Reference:
+    """(x_r, ẋ_r, ẍ_r) of (7) for each robot's group at one instant (depends on the wish only)."""
+
+    x_r: np.ndarray
+    x_r_dot: np.ndarray
+    x_r_ddot: np.ndarray
+
+    def take(self, index) -> "Reference":
+        return Reference(self.x_r[:, index], self.x_r_dot[:, index], self.x_r_ddot[:, index])
+
+
+def projected_reference(frame: GroupFrame, qd, qd_dot, qd_ddot, shape) -> Reference:
+    """reference.projected_reference for each robot's group."""
+    m = matvec(frame.K, qd) + frame.T
+    m_dot = matvec(frame.K, qd_dot)
+    m_ddot = matvec(frame.K, qd_ddot)
+    x_r, d1, d2 = saturate(m, shape)
+    return Reference(x_r, d1 * m_dot, d2 * m_dot**2 + d1 * m_ddot)
+
+
+@dataclass(frozen=True)
+class Coordinates:
+    """transform.coordinates (the parts the laws read) for each robot."""
+
+    x: np.ndarray
+    z: np.ndarray
+    ref: Reference
+
+    @property
+    def inside(self) -> np.ndarray:
+        return np.all(self.x < 0.0, axis=0)
+
+
+def coordinates(frame: GroupFrame, q: np.ndarray, ref: Reference) -> Coordinates:
+    x = matvec(frame.K, q) + frame.T
+    return Coordinates(x, np.log(x / ref.x_r), ref)
+
+
+def _error_signals(frame: GroupFrame, c: Coordinates, v, lam):
+    """(p, v_ref, v̇_ref) of transform.py: v_ref = K⁻¹[(1+λ)z + e^z ẋ_r], p = v − v_ref."""
+    r = c.ref
+    zd = matvec(frame.K, v) / c.x - r.x_r_dot / r.x_r
+    ez = np.exp(c.z)
+    v_ref = matvec(frame.K_inv, (1.0 + lam) * c.z + ez * r.x_r_dot)
+    a_ref = matvec(frame.K_inv, (1.0 + lam) * zd + ez * zd * r.x_r_dot + ez * r.x_r_ddot)
+    return v - v_ref, v_ref, a_ref
+
+
+class CertaintyEquivalent:
+    """(12)."""
+
+    state_size = 0
+    projects_estimate = True
+
+    def __init__(self, law: CertaintyEquivalentLaw, n: int):
+        self.lam = law.lam
+        self.kp = diag_gain(law.Kp, n)[:, None]
+        self.gamma = law.gamma_theta
+
+    def initial_state(self, z, p):
+        return np.zeros((0, z.shape[1]))
+
+    def evaluate(self, frame, c, v, theta_hat, state):
+        p, v_ref, a_ref = _error_signals(frame, c, v, self.lam)
+        u = -self.kp * p - rmatvec(frame.K, c.z / c.x) + plant.regressor_times(v, v_ref, a_ref, theta_hat)
+        theta_dot = -plant.regressor_transpose_times(v, v_ref, a_ref, p) / self.gamma
+        return u, theta_dot, None
+
+    def estimate(self, theta_hat, state):
+        return theta_hat
+
+
+class NonCertaintyEquivalent:
+    """(13)–(15); state rows [p_n (n), W_n (n·n_θ, row-major)]."""
+
+    projects_estimate = False
+
+    def __init__(self, law: NonCertaintyEquivalentLaw, n: int, n_theta: int):
+        self.lam, self.k_q, self.alpha, self.gamma = law.lam, law.k_q, law.alpha_n, law.gamma_n
+        self.n, self.k = n, n_theta
+        self.state_size = n + n * n_theta
+
+    def _split(self, state):
+        n, k = self.n, self.k
+        return state[:n], state[n:].reshape((n, k) + state.shape[1:])
+
+    def initial_state(self, z, p):
+        """(15): p_n(0) = p(0)/(α_n − k_q), W_n(0) = 0; `p` is p at the take-over."""
+        out = np.zeros((self.state_size, p.shape[1]))
+        out[: self.n] = p / (self.alpha - self.k_q)
+        return out
+
+    def evaluate(self, frame, c, v, theta_hat, state):
+        p_n, W_n = self._split(state)
+        p, v_ref, a_ref = _error_signals(frame, c, v, self.lam)
+        W = plant.nce_regressor(v, p, v_ref, a_ref, self.k_q)
+        s = p + (self.k_q - self.alpha) * p_n
+        g = self.gamma
+        beta = g * rmatvec(W_n, p_n)
+        u = matvec(-W, theta_hat + beta) - g * matvec(W_n, rmatvec(W_n, s))
+        theta_dot = g * rmatvec(self.alpha * W_n - W, p_n) + g * self.k_q * rmatvec(W_n, p_n)
+        rate = np.empty_like(state)
+        rate[: self.n] = -self.alpha * p_n + p
+        rate[self.n:] = (-self.alpha * W_n + W).reshape(self.n * self.k, -1)
+        return u, theta_dot, rate
+
+    def estimate(self, theta_hat, state):
+        """θ̂ + β, β = γ_n W_nᵀ p_n."""
+        p_n, W_n = self._split(state)
+        return theta_hat + self.gamma * rmatvec(W_n, p_n)
+
+
+class OutputFeedback:
+    """(25)–(29); state rows [z_f (n), ξ (n)]."""
+
+    projects_estimate = True
+
+    def __init__(self, law: OutputFeedbackLaw, n: int):
+        self.n = n
+        self.state_size = 2 * n
+        self.k = law.k2 + 1.0
+        self.k1 = diag_gain(law.K1, n)[:, None]
+        self.stiffness, self.gamma, self.width = law.stiffness, law.gamma_theta, law.sign_width
+
+    def initial_state(self, z, p):
+        """z_f(0) = 0, ξ(0) = (k2 + 1) z(0) ((26), (28))."""
+        return np.concatenate([np.zeros_like(z), self.k * z])
+
+    def evaluate(self, frame, c, v_hat, theta_hat, state):
+        n, k = self.n, self.k
+        z_f, xi = state[:n], state[n:]
+        z, r = c.z, c.ref
+        r_f = xi - k * z
+        ez = np.exp(z)
+        w = matvec(frame.K_inv, ez * r.x_r_dot)
+        w0_dot = matvec(frame.K_inv, ez * r.x_r_ddot)
+        inner = -self.k1 * np.tanh((z + z_f) / self.width) + k * r_f - z
+        u = rmatvec(frame.K, self.stiffness * inner / c.x) + plant.regressor_times(w, w, w0_dot, theta_hat)
+        rate = np.concatenate([-z_f + r_f, -r_f - k * (z + r_f) + z - z_f])
+        zd_hat = matvec(frame.K, v_hat) / c.x - r.x_r_dot / r.x_r
+        eta_hat = zd_hat + z + r_f
+        N_eta = matvec(frame.K_inv, c.x * eta_hat)
+        theta_dot = -plant.regressor_transpose_times(w, w, w0_dot, N_eta) / self.gamma
+        return u, theta_dot, rate
+
+    def estimate(self, theta_hat, state):
+        return theta_hat
+
+
+class Observer:
+    """(40) on q: state rows [q̂ (n), β_o (n)], v̂ = β_o + K_a (q − q̂)."""
+
+    def __init__(self, observer: VelocityObserver, n: int):
+        ka, kb = diag_gain(observer.Ka, n), diag_gain(observer.Kb, n)
+        if np.any(ka <= 1.0):
+            raise ValueError("observer needs K_a > 1 so that K_c = K_a − I is positive")
+        self.n, self.ka, self.kb, self.kc = n, ka[:, None], kb[:, None], (ka - 1.0)[:, None]
+        self.width = observer.sign_width
+
+    def initial_state(self, q0: np.ndarray) -> np.ndarray:
+        """q̂(0) = q(0), β_o(0) = 0."""
+        return np.concatenate([q0, np.zeros_like(q0)])
+
+    def velocity(self, q, state):
+        return state[self.n:] + self.ka * (q - state[: self.n])
+
+    def derivative(self, q, state, out):
+        q_tilde = q - state[: self.n]
+        np.add(state[self.n:], self.ka * q_tilde, out=out[: self.n])
+        np.add(self.kb * np.tanh(q_tilde / self.width), self.kc * q_tilde, out=out[self.n:])
+        return out

@@ -1,0 +1,85 @@
+"""The omnidirectional robot of models/omni_robot.py for a whole batch (paper (1), Section 5).
+
+M = diag(m1, m1, m3), C(q, q̇) = a ψ̇ [[0, 1, 0], [−1, 0, 0], [0, 0, 0]], g = 0, θ = [m1, m3, a].
+The regressor Y(q, v, w, a) θ = M a + C(q, v) w + g of (11) is
+
+    Y = [[a₀, 0, ψ̇ w₁], [a₁, 0, −ψ̇ w₀], [0, a₂, 0]],   ψ̇ = v₂,
+
+so every product the laws need (Y θ̂, Yᵀ p, and the matrix W of (14)) is a handful of
+elementwise operations on (3, N) arrays. Each robot may have its own true θ (mass, inertia).
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from ..models.omni_robot import OmniRobot
+
+
+class BatchPlantError(TypeError):
+    """A model the batch has no vectorised form for."""
+
+
+def check_model(model) -> None:
+    if not isinstance(model, OmniRobot):
+        raise BatchPlantError(f"the batched simulator covers the omni robot only, got {type(model).__name__}")
+
+
+def acceleration(theta: np.ndarray, v: np.ndarray, u: np.ndarray, out: np.ndarray) -> np.ndarray:
+    """q̈ = M⁻¹(u − C q̇) with the true θ (3, N), written into `out` (3, N)."""
+    m1, m3, a = theta
+    a_psi = a * v[2]
+    np.divide(u[0] - a_psi * v[1], m1, out=out[0])
+    np.divide(u[1] + a_psi * v[0], m1, out=out[1])
+    np.divide(u[2], m3, out=out[2])
+    return out
+
+
+def regressor_times(v, w, a, theta) -> np.ndarray:
+    """Y(q, v, w, a) θ for every robot."""
+    psi = v[2]
+    return np.stack((a[0] * theta[0] + (psi * w[1]) * theta[2],
+                     a[1] * theta[0] + (-psi * w[0]) * theta[2],
+                     a[2] * theta[1]))
+
+
+def regressor_transpose_times(v, w, a, p) -> np.ndarray:
+    """Y(q, v, w, a)ᵀ p for every robot."""
+    psi = v[2]
+    return np.stack((a[0] * p[0] + a[1] * p[1],
+                     a[2] * p[2],
+                     (psi * w[1]) * p[0] + (-psi * w[0]) * p[1]))
+
+
+def nce_regressor(v, p, v_ref, a_ref, k_q: float) -> np.ndarray:
+    """W = Ṁ s + k_q M p − C(q, v) p − Y(q, v, v_ref, a_ref) of (14) (Ṁ = 0), shape (3, 3, N)."""
+    psi = v[2]
+    W = np.zeros((3, 3) + v.shape[1:])
+    W[0, 0] = k_q * p[0] - a_ref[0]
+    W[1, 0] = k_q * p[1] - a_ref[1]
+    W[2, 1] = k_q * p[2] - a_ref[2]
+    W[0, 2] = -(psi * p[1]) - psi * v_ref[1]
+    W[1, 2] = -(-psi * p[0]) - (-psi * v_ref[0])
+    return W
+
+
+def project(theta_hat: np.ndarray) -> np.ndarray:
+    """The omni robot's parameter box (EulerLagrangeModel.project)."""
+    lower = np.asarray(OmniRobot.theta_lower, float)[:, None]
+    upper = np.asarray(OmniRobot.theta_upper, float)[:, None]
+    return np.clip(theta_hat, lower, upper)
+
+
+def wheel_torques(q: np.ndarray, u: np.ndarray, model: OmniRobot) -> np.ndarray:
+    """τ = B(ψ)⁻¹ u for rows of q, u (T, 3) (for traces)."""
+    p = model.parameters
+    psi, d = q[:, 2], p.delta
+    B = np.zeros((q.shape[0], 3, 3))
+    B[:, 0, 0], B[:, 0, 1], B[:, 0, 2] = -np.sin(d + psi), -np.sin(d - psi), np.cos(psi)
+    B[:, 1, 0], B[:, 1, 1], B[:, 1, 2] = np.cos(d + psi), -np.cos(d - psi), np.sin(psi)
+    B[:, 2, :] = p.wheel_distance
+    B /= p.wheel_radius
+    good = np.all(np.isfinite(u), axis=1) & np.isfinite(psi)
+    out = np.full(u.shape, np.nan)
+    if good.any():
+        out[good] = np.linalg.solve(B[good], u[good][:, :, None])[:, :, 0]
+    return out

@@ -1,0 +1,242 @@
+"""One step of simulator.simulate for every robot of a batch.
+
+1. the sharing function is sampled at the start of the step (arbiter.py) and held over it;
+   on a take-over, group or law change the incoming law's filters restart from their
+   published initial conditions ((15), (26), (28)) and θ̂ carries over (θ̂ + β when leaving (13));
+2. one classical RK4 step of the state [q, q̇, θ̂, law state, observer], the law evaluated at
+   every stage on each robot's own group; θ̂ moves only under full machine authority, and is
+   projected onto the parameter box after the step when the last law projects;
+3. a robot whose RK stage leaves its active group's polytope (the law has no value there), or
+   whose state turns non-finite, stops, with the rows simulator.simulate records for it.
+
+The arithmetic of each formula is the scalar simulator's, operation for operation, so the
+batch reproduces it to rounding (docs/performance-batched.md states the tolerance).
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from ..sharing import Mode
+from .arbiter import HUMAN, MACHINE, arbitrate
+from .geometry import all_groups, classify, missed_rows, projected_configuration, reference_inside, select_group
+from .laws import GroupFrame, coordinates, projected_reference
+from .plant import acceleration, project
+from .results import Rows
+
+
+class StepKernel:
+    """The per-step computation; `engine` carries the scenario's tables, laws and constants."""
+
+    def __init__(self, engine):
+        self.e = engine
+
+    def step(self, fleet, k: int, steps: int, recording):
+        """Advance `fleet` by one step; returns (stopping columns, their Trace.finite) or None."""
+        e = self.e
+        L, dt, table = e.layout, e.dt, e.table
+        Y, ops = fleet.Y, fleet.operators
+        N = fleet.size
+        t = k * dt
+        h = dt / 2
+        q, v, theta_hat, law_state = Y[L.q], Y[L.v], Y[L.theta], Y[L.law_state]
+        wishes = (ops.desired(t), ops.desired(t + h), ops.desired(t + dt))
+        wish = wishes[0]
+        v_meas = e.observer.velocity(q, Y[L.obs]) if e.observer else v
+        if e.mode is Mode.MACHINE:
+            u_h0, intent = np.zeros_like(q), np.zeros(N)
+        else:
+            u_h0, intent = ops.command(wish, q, v)
+        groups = all_groups(table, q, v_meas, wish.q, wish.q_dot, e.shape, e.lam)
+        ref_ok = reference_inside(table, groups.reference_offset)
+        situation = classify(table, groups.rows, e.sharing.bands)
+        missed = missed_rows(table, situation)
+        chosen = select_group(table, situation, groups.value, missed, ref_ok)
+        fleet.arbiter, dec = arbitrate(table, e.sharing, fleet.arbiter, situation, groups.rows.x, missed, chosen, intent, dt)
+
+        # --- law (re)initialisation, as in simulator.simulate --------------------------------
+        engaged = (dec.authority != HUMAN) & (dec.group >= 0)
+        reinit = engaged & (~fleet.engaged_before | dec.group_changed | dec.role_changed | (fleet.law_role < 0))
+        release = ~engaged & fleet.engaged_before & fleet.has_state
+        carry = (reinit | release) & fleet.has_state
+        if carry.any():
+            for index, law in enumerate(e.distinct):
+                cols = np.flatnonzero(carry & e.runs(index, fleet.law_role))
+                if cols.size:
+                    theta_hat[:, cols] = law.estimate(theta_hat[:, cols], law_state[: law.state_size, cols])
+        if reinit.any():
+            cols = np.flatnonzero(reinit)
+            roles = dec.role[cols]
+            for index, law in enumerate(e.distinct):
+                sub = cols[e.runs(index, roles)]
+                if sub.size and law.state_size:
+                    g = dec.group[sub]
+                    z = groups.rows.z[table.group_rows[g], sub[:, None]].T
+                    law_state[: law.state_size, sub] = law.initial_state(z, groups.p[g, :, sub].T)
+            fleet.law_role[cols] = roles
+            fleet.has_state[cols] = e.state_size[roles] > 0
+        fleet.has_state &= ~release
+        fleet.engaged_before = engaged
+
+        # --- RK4 -----------------------------------------------------------------------------
+        plan = self.plan(engaged, dec, wishes)
+        machine = dec.authority == MACHINE
+        escaped = np.zeros(N, bool)
+        d1, u_h, u_f, u_s = self.rates(fleet, Y, wish, plan, 0, dec, machine, escaped, u_h0)
+        stage1 = escaped.copy()
+        rows = self.rows(t, fleet, Y, v_meas, wish, groups, chosen, engaged, dec, situation, intent,
+                         (u_h, u_f, u_s), stage1)
+        fleet.tally.add(rows)
+        if recording is not None:
+            recording.put(k, fleet.ids, rows)
+
+        stage = np.multiply(d1, h)
+        stage += Y
+        d2 = self.rates(fleet, stage, wishes[1], plan, 1, dec, machine, escaped)[0]
+        first_escape = {}
+        _note(first_escape, escaped, stage1, stage)
+        np.multiply(d2, h, out=stage)
+        stage += Y
+        d3 = self.rates(fleet, stage, wishes[1], plan, 1, dec, machine, escaped)[0]
+        _note(first_escape, escaped, stage1, stage)
+        np.multiply(d3, dt, out=stage)
+        stage += Y
+        d4 = self.rates(fleet, stage, wishes[2], plan, 2, dec, machine, escaped)[0]
+        _note(first_escape, escaped, stage1, stage)
+        # s + (dt/6)(a + 2b + 2c + d), summed in that order
+        nxt = np.multiply(d2, 2.0, out=stage)
+        nxt += d1
+        d3 *= 2.0
+        nxt += d3
+        nxt += d4
+        nxt *= dt / 6.0
+        nxt += Y
+        projecting = (fleet.law_role >= 0) & e.projects[fleet.law_role]
+        if projecting.any():
+            th = nxt[L.theta]
+            th[:, projecting] = project(th[:, projecting])
+        finite = np.isfinite(nxt).all(axis=0)
+        going = ~escaped & finite
+        fleet.Y = nxt
+        if going.all():
+            return None
+
+        # --- robots that stop this step ---------------------------------------------------------
+        late = escaped & ~stage1
+        if late.any() and k + 1 < steps:
+            cols = np.flatnonzero(late)
+            Ye = np.stack([first_escape[c] for c in cols], axis=1)
+            extra = self.escape_rows(t + dt, Ye[L.q], Ye[L.v])
+            fleet.tally.add(extra, cols)
+            if recording is not None:
+                recording.put(k + 1, fleet.ids[cols], extra)
+        stop = np.flatnonzero(~going)
+        return stop, finite[stop] | escaped[stop]
+
+    # ------------------------------------------------------------------------------
+    def plan(self, engaged, dec, wishes):
+        """Per distinct law: its robots, their group frames and the projected reference at the
+        three stage times t, t + dt/2, t + dt (the reference depends on the wish only)."""
+        e = self.e
+        cols_all = np.flatnonzero(engaged)
+        if cols_all.size == 0:
+            return []
+        entries = []
+        roles = dec.role[cols_all]
+        for index, law in enumerate(e.distinct):
+            cols = cols_all[e.runs(index, roles)]
+            if cols.size == 0:
+                continue
+            g = dec.group[cols]
+            frame = GroupFrame(e.K_cols[..., g], e.T_cols[:, g], e.K_inv_cols[..., g])
+            refs = [projected_reference(frame, w.q[:, cols], w.q_dot[:, cols], w.q_ddot[:, cols], e.shape) for w in wishes]
+            entries.append((law, cols, frame, refs))
+        return entries
+
+    def rates(self, fleet, Y, wish, plan, stage_time, dec, machine, escaped, u_h=None):
+        """The closed loop's rate at one RK stage (simulator.simulate's `rates`); also u_h, u_f, u_s."""
+        e = self.e
+        L, n = e.layout, e.n
+        q, v, theta_hat, law_state = Y[L.q], Y[L.v], Y[L.theta], Y[L.law_state]
+        N = Y.shape[1]
+        out = np.empty_like(Y)
+        out[L.q] = v
+        out[L.theta] = 0.0
+        out[L.law_state] = 0.0
+        obs = Y[L.obs] if e.observer else None
+        v_meas = e.observer.velocity(q, obs) if e.observer else v
+        if u_h is None:
+            u_h = np.zeros((n, N)) if e.mode is Mode.MACHINE else fleet.operators.force(wish, q, v)
+        u_f = np.zeros((n, N))
+        for law, cols, frame, refs in plan:
+            c = coordinates(frame, q[:, cols], refs[stage_time])
+            escaped[cols] |= ~c.inside
+            size = law.state_size
+            u, theta_dot, rate = law.evaluate(frame, c, v_meas[:, cols], theta_hat[:, cols], law_state[:size, cols])
+            u_f[:, cols] = u
+            if size:
+                out[L.law_state.start: L.law_state.start + size, cols] = rate
+            mach = machine[cols]
+            if mach.all():
+                out[L.theta, cols] = theta_dot
+            elif mach.any():
+                out[L.theta, cols[mach]] = theta_dot[:, mach]
+        # (46)/(47): u_h (k_s = 1), u_f (hazardous), k_h u_h + k_f u_f (held k_s = 0)
+        u_s = dec.human_weight * u_h
+        u_s += dec.machine_weight * u_f
+        acceleration(fleet.theta, v, u_s, out[L.v])
+        if e.observer:
+            e.observer.derivative(q, obs, out[L.obs])
+        return out, u_h, u_f, u_s
+
+    def estimate(self, fleet, theta_hat, law_state):
+        """The estimate each robot's law stands for (θ̂, or θ̂ + β under (13))."""
+        e = self.e
+        estimate = theta_hat.copy()
+        for index, law in enumerate(e.distinct):
+            if law.state_size:
+                cols = np.flatnonzero(fleet.has_state & e.runs(index, fleet.law_role))
+                if cols.size:
+                    estimate[:, cols] = law.estimate(theta_hat[:, cols], law_state[: law.state_size, cols])
+        return estimate
+
+    def rows(self, t, fleet, Y, v_meas, wish, groups, chosen, engaged, dec, situation, intent, signals, escaped):
+        """The simulator's recorded sample at the start of the step (partial where the first stage escaped)."""
+        L = self.e.layout
+        u_h, u_f, u_s = signals
+        ref_group = np.where(engaged, dec.group, chosen)
+        q_r = projected_configuration(self.e.table, groups.reference_offset, ref_group)
+        estimate = self.estimate(fleet, Y[L.theta], Y[L.law_state])
+        extra = {"v_hat": v_meas, "q_d": wish.q, "u_h": u_h, "u_f": u_f, "set_class": dec.overall, "group": dec.group,
+                 "role": dec.role, "k_h": dec.k_h, "k_f": dec.k_f, "intent": intent}
+        rows = Rows(t, Y[L.q], Y[L.v], q_r, u_s, estimate, dec.authority, situation.margin, situation.inside, extra)
+        if escaped.any():
+            # simulator.simulate records only t, q, v, margin and inside when the first stage escapes
+            for name in ("q_r", "u_s", "theta_hat"):
+                arr = np.array(getattr(rows, name), dtype=float)
+                arr[:, escaped] = np.nan
+                setattr(rows, name, arr)
+            rows.authority = np.where(escaped, -1, rows.authority)
+            for name, value in extra.items():
+                labels = name in ("set_class", "group", "role")
+                value = np.array(value, dtype=int if labels else float)
+                value[..., escaped] = -1 if labels else np.nan
+                extra[name] = value
+        return rows
+
+    def escape_rows(self, t, q, v):
+        """The row simulator.simulate records for a state an RK stage reached outside the group."""
+        e = self.e
+        M = q.shape[1]
+        margin = np.array([e.feasible.margin(q[:, i]) for i in range(M)])
+        inside = np.array([e.feasible.contains(q[:, i]) for i in range(M)])
+        nan_n = np.full((e.n, M), np.nan)
+        extra = {"v_hat": nan_n, "q_d": nan_n, "u_h": nan_n, "u_f": nan_n, "set_class": np.full(M, -1),
+                 "group": np.full(M, -1), "role": np.full(M, -1), "k_h": np.full(M, np.nan), "k_f": np.full(M, np.nan),
+                 "intent": np.full(M, np.nan)}
+        return Rows(t, q, v, nan_n, nan_n, np.full((e.k, M), np.nan), np.full(M, -1), margin, inside, extra)
+
+
+def _note(first_escape, escaped, stage1, Ys):
+    """Remember the stage state at which each robot first escaped (after the first stage)."""
+    for c in np.flatnonzero(escaped & ~stage1):
+        first_escape.setdefault(int(c), Ys[:, c].copy())
