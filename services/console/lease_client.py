@@ -109,6 +109,6 @@ class LeaseClient:
                 self.holding = reply.granted
                 if reply.granted:
                     self.granted_at = reply.time
-            elif reply.granted:
-                self.holding = False
+            else:
+                self.holding = False          # released, or refused because this session no longer held it
         return reply

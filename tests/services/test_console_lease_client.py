@@ -72,3 +72,10 @@ def test_a_reply_to_another_request_is_ignored():
     client = LeaseClient("r1", "alice", "a1")
     stale = StandIn(lambda req: LeaseReply(request_seq=req.seq + 7, time=1.0, granted=True, holder="alice", reason=""))
     assert client.ask(stale, LeaseAction.TAKE) is None and not client.holding
+
+
+def test_a_refused_release_also_means_not_holding():
+    client = LeaseClient("r1", "alice", "a1")
+    client.ask(StandIn(lambda req: reply(req, True, "alice")), LeaseAction.TAKE)
+    client.ask(StandIn(lambda req: reply(req, False, None)), LeaseAction.RELEASE)   # already released in-band
+    assert not client.holding
