@@ -90,3 +90,39 @@ def test_controller_and_robot_start_after_the_router():
 def test_installed_paths_match_the_walkthrough():
     doc = DOC.read_text()
     assert "/opt/sharedctl/venv" in doc and Path(INSTALLED).parent.parent.as_posix() == "/opt/sharedctl/venv"
+
+
+def expand_group(analyze: str, item: str, seen: set[str]) -> set[str]:
+    """The system calls of a filter item; `@group`s (which may name other groups) expanded by systemd-analyze."""
+    if not item.startswith("@"):
+        return {item}
+    if item in seen:
+        return set()
+    seen.add(item)
+    listing = subprocess.run([analyze, "syscall-filter", item], capture_output=True, text=True, timeout=60).stdout
+    calls = set()
+    for line in listing.splitlines():
+        entry = line.strip()
+        if line.startswith("    ") and entry and not entry.startswith("#"):
+            calls |= expand_group(analyze, entry, seen)
+    return calls
+
+
+def allowed_syscalls(analyze: str, unit: Path) -> set[str]:
+    """Every system call a unit's SystemCallFilter= allows."""
+    seen: set[str] = set()
+    return set().union(*(expand_group(analyze, item, seen) for item in unit_keys(unit)["SystemCallFilter"].split()))
+
+
+def test_the_controllers_syscall_filter_allows_its_priority_calls():
+    analyze = shutil.which("systemd-analyze")
+    if analyze is None:
+        pytest.skip("systemd-analyze is not installed on this host")
+    allowed = allowed_syscalls(analyze, DEPLOY / "systemd" / "sharedctl-controller.service")
+    assert {"sched_setscheduler", "setpriority", "getpriority", "socket", "bind"} <= allowed
+    assert "reboot" not in allowed and "kexec_load" not in allowed and "init_module" not in allowed
+
+
+def test_a_filtered_call_fails_with_eperm_instead_of_killing_the_service():
+    for unit in UNITS:
+        assert unit_keys(unit)["SystemCallErrorNumber"] == "EPERM", unit.name
