@@ -32,7 +32,7 @@ def answer(payload: bytes, lease: OperatorLease, guard: ReplayGuard, rejections:
     except Exception as exc:  # noqa: BLE001 — a bad payload never escapes the queryable
         rejections[f"lease_unexpected_{type(exc).__name__}"] += 1
         return _reply(0, wall_now, False, lease, now, "malformed lease request")
-    reason = guard.admit(request.session_id, request.seq, request.time, now, wall_now)
+    reason = guard.admit(f"{request.operator_id}/{request.session_id}", request.seq, request.time, now, wall_now)
     if reason is not None:
         rejections[f"lease_{reason}"] += 1
         return _reply(request.seq, wall_now, False, lease, now, f"request dropped: {reason}")

@@ -105,7 +105,9 @@ class OperatorInputPolicy:
         """Apply the estop, ordering, age and lease policy to a decoded command."""
         if command.estop:
             self.estop_requested = True          # honoured from anyone, before any other check
-        reason = self.guard.admit(command.session_id, command.seq, command.send_time, now, wall_now)
+        # keyed by operator and session: another sender naming this session cannot advance its seq
+        reason = self.guard.admit(f"{command.operator_id}/{command.session_id}", command.seq, command.send_time,
+                                  now, wall_now)
         if reason is None:
             reason = self.lease.admit_command(command.operator_id, command.session_id, command.control_request, now)
         if reason == "released":

@@ -81,3 +81,11 @@ def test_explicit_mode_before_any_take_commands_are_refused_then_a_take_gives_co
     assert offer(policy, command("alice", "a1", 2, request=ControlRequest.TAKE), 10.02)
     assert offer(policy, command("alice", "a1", 3), 10.04)
     assert not policy.operator_input(10.05, POSE)[1].hands_off
+
+
+def test_another_sender_naming_the_holders_session_cannot_push_its_sequence_ahead():
+    policy = OperatorInputPolicy(KP)
+    offer(policy, command("alice", "a1", 1), 10.0)
+    assert not offer(policy, command("mallory", "a1", 2**64 - 1), 10.01)     # not the holder
+    assert offer(policy, command("alice", "a1", 2, joystick=(0.0, 0.5, 0.0)), 10.02)
+    np.testing.assert_allclose(policy.operator_input(10.03, POSE)[0].force, KP * [0.0, 0.5, 0.0])
