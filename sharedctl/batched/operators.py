@@ -50,6 +50,16 @@ class OperatorBatch:
     circle_omega: np.ndarray       # (N,)
     circle_phase: np.ndarray       # (N,)
 
+    @staticmethod
+    def adversaries(kp: np.ndarray, target: np.ndarray, deflection: np.ndarray) -> "OperatorBatch":
+        """N adversarial operators (human.AdversarialOperator) given as arrays: k_p and target
+        (n, N), deflection (N,); each wish is the point `target`, as the scenario files build it."""
+        n, N = target.shape
+        zeros, none = np.zeros((n, N)), np.zeros(N, bool)
+        return OperatorBatch(np.broadcast_to(kp, (n, N)).astype(float), zeros, np.ones(N, bool), target.astype(float),
+                             np.broadcast_to(deflection, (N,)).astype(float), none, target.astype(float), zeros,
+                             np.zeros((2, N)), np.zeros(N), np.zeros(N), np.zeros(N))
+
     @property
     def size(self) -> int:
         return self.kp.shape[1]
@@ -94,7 +104,7 @@ class OperatorBatch:
             tracking = (desired.q - q) + self.damping_ratio * (desired.q_dot - v)
             if not any_adv:
                 return tracking
-        pushing = np.clip(self.target - q, -self.deflection, self.deflection)
+        pushing = np.minimum(np.maximum(self.target - q, -self.deflection), self.deflection)   # np.clip, faster
         return pushing if all_adv else np.where(self.adversarial, pushing, tracking)
 
     def command(self, desired: DesiredBatch, q: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
