@@ -1,5 +1,6 @@
 """The in-process operator link: rate, delay, loss, hold-last-value and the 0.3 s hands-off."""
 import numpy as np
+import pytest
 
 from sharedctl.baselines.operator_link import LinkConditions, OperatorLink
 from sharedctl.human import AdversarialOperator, LineTrajectory
@@ -21,7 +22,7 @@ def _inputs(conditions, seconds):
 def test_commands_arrive_after_the_uplink_delay_clipped_to_the_wire_range():
     link, out = _inputs(LinkConditions(uplink_delay=0.1), 0.2)
     first_active = next(k for k, (_, off) in enumerate(out) if not off)
-    assert first_active * PERIOD == pytest_approx(0.1)
+    assert first_active * PERIOD == pytest.approx(0.1, abs=1e-9)
     op, _ = out[-1]
     assert np.allclose(op.force, [0.0, 20.0, 0.0])          # deflection 9 m clipped to 1
     assert op.intent == 0.5 * 20.0
@@ -44,8 +45,3 @@ def test_losses_follow_the_seed():
     assert a.sent == 100 and a.lost == b.lost
     assert (a.lost, a._rng.random()) != (c.lost, c._rng.random())
 
-
-def pytest_approx(x):
-    import pytest
-
-    return pytest.approx(x, abs=1e-9)
