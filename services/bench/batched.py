@@ -37,7 +37,7 @@ from sharedctl.simulator import ClosedLoop, simulate
 
 DT = 0.001
 QUICK = {"robots": 4096, "seconds": 0.2, "repeats": 3, "scalar_robots": 2}
-FULL = {"robots": 16384, "seconds": 0.5, "repeats": 5, "scalar_robots": 3}
+FULL = {"robots": 16384, "seconds": 0.3, "repeats": 3, "scalar_robots": 3}
 
 
 def _loop(controller: str = "ce") -> ClosedLoop:
@@ -101,7 +101,8 @@ def measure_batched(quick: bool) -> dict:
     problem = fleet(loop, p["robots"])
     workers = max(1, min(os.cpu_count() or 1, 2))
     scalar, one, many = [], [], []
-    with multiprocessing.get_context("fork").Pool(workers) as pool:
+    # spawn, not fork: the caller may hold threads (Zenoh, CAN) that a forked child must not inherit
+    with multiprocessing.get_context("spawn").Pool(workers) as pool:
         pool.map(_run_part, [(problem.take(slice(0, 8)), 10 * DT, 8)] * workers)    # start-up outside the timing
         for _ in range(p["repeats"]):
             scalar.append(_scalar_rate(loop, problem, p["scalar_robots"], p["seconds"]))
