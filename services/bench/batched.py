@@ -80,7 +80,7 @@ def _run_part(args) -> tuple[int, float]:
     return int(result.steps.sum()), time.process_time() - cpu
 
 
-def _batch_rate(problem: BatchProblem, seconds: float, chunk: int = 4096, pool=None, parts: int = 1) -> tuple[float, float]:
+def _batch_rate(problem: BatchProblem, seconds: float, chunk: int = 8192, pool=None, parts: int = 1) -> tuple[float, float]:
     """(robot-steps/s of wall time, of CPU time summed over the processes); `pool` runs `parts` slices at once."""
     slices = [problem.take(idx) for idx in np.array_split(np.arange(problem.size), parts)]
     wall = time.perf_counter()

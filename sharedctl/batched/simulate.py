@@ -22,7 +22,7 @@ from .results import BatchResult, Recording, Tally, finish
 from .step import StepKernel
 
 
-def simulate_batch(problem: BatchProblem, duration: float, dt: float, record: bool = False, chunk: int = 4096) -> BatchResult:
+def simulate_batch(problem: BatchProblem, duration: float, dt: float, record: bool = False, chunk: int = 8192) -> BatchResult:
     """Run every robot of `problem` for `duration` s with step `dt` (simulator.simulate's algorithm).
 
     Returns per-robot summaries (the fields of metrics.summarize); with `record`, also every
