@@ -13,7 +13,7 @@ its coordinates are x^i = K_i q + T_i and feasibility means every x^i_j < 0.
 from __future__ import annotations
 
 import itertools
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -75,11 +75,21 @@ class ConstraintGroup:
 
 @dataclass(frozen=True)
 class GroupStack:
-    """All groups' matrices stacked, for evaluating every group at once."""
+    """All groups' matrices stacked, for evaluating every group at once.
+
+    `K_rows` (G·n × n) and `T_rows` (G·n) are the same rows flattened: one matrix product gives
+    every group's x = K q + T (transform.all_groups).
+    """
 
     K: np.ndarray       # G×n×n
     T: np.ndarray       # G×n
     K_inv: np.ndarray   # G×n×n
+    K_rows: np.ndarray = field(init=False, repr=False, compare=False)
+    T_rows: np.ndarray = field(init=False, repr=False, compare=False)
+
+    def __post_init__(self):
+        object.__setattr__(self, "K_rows", np.ascontiguousarray(self.K.reshape(-1, self.K.shape[-1])))
+        object.__setattr__(self, "T_rows", np.ascontiguousarray(self.T.reshape(-1)))
 
     @staticmethod
     def of(groups) -> "GroupStack":
@@ -127,16 +137,47 @@ class FeasibleSet:
         """The best region's smallest slack: > 0 inside the union, ≤ 0 outside."""
         return max(r.margin(q) for r in self.regions)
 
-    def region_margins(self, q: np.ndarray) -> np.ndarray:
-        return np.array([r.margin(q) for r in self.regions])
+    def region_margins(self, q: np.ndarray, values: list | None = None) -> np.ndarray:
+        """Each region's smallest slack (Polytope.margin), from one product with the stacked rows
+        (or from `values`, the first list of `row_values(q, ·)`)."""
+        rows = self._rows
+        if values is None:
+            values = (rows.K @ q + rows.T).tolist()
+        return np.array([-_max_or_nan(values[a:b]) for a, b in rows.spans])
+
+    @property
+    def group_row_sets(self) -> tuple[frozenset, ...]:
+        """Each group's row indices as a set (select_group's covering test)."""
+        cached = self.__dict__.get("_row_sets_cache")
+        if cached is None:
+            cached = tuple(frozenset(g.rows) for g in self.groups)
+            object.__setattr__(self, "_row_sets_cache", cached)
+        return cached
+
+    def row_values(self, q: np.ndarray, v: np.ndarray) -> tuple[list, list]:
+        """K q + T and K v for the rows of every region, stacked (spans in `row_spans`), as floats."""
+        rows = self._rows
+        both = rows.K @ np.array([q, v]).T
+        return (both[:, 0] + rows.T).tolist(), both[:, 1].tolist()
+
+    @property
+    def row_spans(self) -> tuple[tuple[int, int], ...]:
+        """(first, end) row of each region in the stacked rows of `row_values`."""
+        return self._rows.spans
 
     def reference_inside(self, points: np.ndarray) -> np.ndarray:
         """For G points (one per group), is point g inside group g's own polytope?"""
-        out = np.zeros(len(self.groups), dtype=bool)
-        for r, region in enumerate(self.regions):
-            members = self._members[r]
-            out[members] = np.all(points[members] @ region.K.T + region.T <= 0.0, axis=1)
-        return out
+        rows = self._rows
+        outside = ~(points @ rows.K.T + rows.T <= 0.0) & rows.own     # NaN counts as outside
+        return ~outside.any(axis=1)
+
+    @property
+    def _rows(self) -> "_StackedRows":
+        cached = self.__dict__.get("_rows_cache")
+        if cached is None:
+            cached = _StackedRows.of(self)
+            object.__setattr__(self, "_rows_cache", cached)
+        return cached
 
     @property
     def _members(self) -> list[np.ndarray]:
@@ -151,6 +192,35 @@ class FeasibleSet:
         """Groups whose polytope contains q ("which groups apply here")."""
         inside = set(self.containing_regions(q))
         return [g for g, grp in enumerate(self.groups) if grp.region in inside]
+
+
+@dataclass(frozen=True)
+class _StackedRows:
+    """Every region's rows in one matrix: `spans[r]` are region r's rows; `own[g, j]` says row j
+    belongs to group g's polytope."""
+
+    K: np.ndarray
+    T: np.ndarray
+    spans: tuple[tuple[int, int], ...]
+    own: np.ndarray
+
+    @staticmethod
+    def of(feasible: FeasibleSet) -> "_StackedRows":
+        sizes = [r.K.shape[0] for r in feasible.regions]
+        ends = np.cumsum(sizes).tolist()
+        spans = tuple((end - size, end) for size, end in zip(sizes, ends))
+        own = np.zeros((len(feasible.groups), ends[-1]), dtype=bool)
+        for g, grp in enumerate(feasible.groups):
+            a, b = spans[grp.region]
+            own[g, a:b] = True
+        return _StackedRows(np.vstack([r.K for r in feasible.regions]), np.concatenate([r.T for r in feasible.regions]),
+                            spans, own)
+
+
+def _max_or_nan(values: list) -> float:
+    """max() that, like np.max, returns NaN when any value is NaN."""
+    top = max(values)
+    return top if all(v == v for v in values) else float("nan")
 
 
 def complete(poly: Polytope, distance: float) -> Polytope:

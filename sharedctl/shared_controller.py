@@ -11,7 +11,8 @@ immutable, so the daemon, a test and a replay all run the same code.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field, replace
+import math
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -21,7 +22,7 @@ from .reference import ReferenceShape
 from .sets import SetClass
 from .sharing import ArbiterState, Authority, LawRole, Mode, SharingParameters, arbitrate, select_group, shared_input
 from .simulator import MachineController
-from .transform import Desired, all_groups, coordinates
+from .transform import Desired, GroupsAtOnce
 
 
 @dataclass(frozen=True)
@@ -77,15 +78,24 @@ class SharedController:
         return ControllerState(arbiter, theta.copy(), None, np.zeros(0), observer)
 
     def step(self, state: ControllerState, q: np.ndarray, v: np.ndarray | None, operator: OperatorInput, dt: float):
-        """One sample: returns (next state, output). `v` may be None for output feedback."""
+        """One sample: returns (next state, output). `v` may be None for output feedback.
+
+        The hot path of the daemon (docs/performance.md): per-step constants are cached where
+        they are built (stacked rows, gain vectors, parameter box), and small arrays are checked
+        with Python loops rather than array reductions; the arithmetic is that of the functions
+        it calls (tests/test_shared_step_reference.py holds it to recorded outputs).
+        """
         model, feasible, machine = self.model, self.feasible, self.machine
         observer = machine.observer
         v_used = observer.velocity(q, state.observer) if observer else np.asarray(v, float)
         mode = self.sharing.mode
         intent = 0.0 if mode is Mode.MACHINE else operator.intent
-        q_r_all, values = all_groups(feasible.stack, q, v_used, operator.desired, self.reference, machine.tracking.lam)
+        groups = GroupsAtOnce.evaluate(feasible.stack, q, v_used, operator.desired, self.reference, machine.tracking.lam)
+        q_r_all, values = groups.q_r, groups.value
         ref_ok = feasible.reference_inside(q_r_all)
-        arbiter, decision = arbitrate(feasible, self.sharing, state.arbiter, q, v_used, intent, dt, values.__getitem__, ref_ok)
+        lyapunov = values.tolist().__getitem__
+        rows = feasible.row_values(q, v_used)
+        arbiter, decision = arbitrate(feasible, self.sharing, state.arbiter, q, v_used, intent, dt, lyapunov, ref_ok, rows)
 
         theta_hat, law_role, law_state = state.theta_hat, state.law_role, state.law_state
         engaged = decision.authority is not Authority.HUMAN and decision.group is not None
@@ -95,23 +105,23 @@ class SharedController:
                 theta_hat = previous_law.estimate(theta_hat, law_state)
             law_role = decision.role
             grp = feasible.groups[decision.group]
-            c = coordinates(grp, q, v_used, operator.desired, self.reference)
+            c = groups.coordinates(decision.group, grp)
             law_state = machine.law(law_role).initial_state(model, grp, c, q, v_used, theta_hat)
         elif not engaged and previous_law is not None:
             theta_hat = previous_law.estimate(theta_hat, law_state)
-            law_role, law_state = None, np.zeros(0)
+            law_role, law_state = None, _EMPTY
 
-        u_h = np.zeros(model.n) if mode is Mode.MACHINE else np.asarray(operator.force, float)
-        u_f = np.zeros(model.n)
+        u_h = self._zero_force() if mode is Mode.MACHINE else np.asarray(operator.force, float)
+        u_f = self._zero_force()
         theta_next, law_next = theta_hat, law_state
         if engaged:
             grp = feasible.groups[decision.group]
-            c = coordinates(grp, q, v_used, operator.desired, self.reference)
+            c = groups.coordinates(decision.group, grp)
             if c.inside:
                 law = machine.law(law_role)
                 out = law.evaluate(model, grp, c, q, v_used, theta_hat, law_state)
                 u_f = out.u
-                law_next = law_state + dt * out.state_dot
+                law_next = law_state + dt * out.state_dot if law_state.size else law_state
                 if decision.authority is Authority.MACHINE:
                     theta_next = theta_hat + dt * out.theta_dot
                     if law.projects_estimate:
@@ -121,18 +131,21 @@ class SharedController:
         u_s = shared_input(decision, u_h, u_f)
 
         observer_next = state.observer + dt * observer.derivative(q, state.observer) if observer else state.observer
-        ref_group = decision.group if engaged else select_group(feasible, decision.situation, values.__getitem__, ref_ok)
+        ref_group = decision.group if engaged else select_group(feasible, decision.situation, lyapunov, ref_ok)
         q_r = q_r_all[ref_group] if ref_group is not None else np.full(model.n, np.nan)
         estimate = machine.law(law_role).estimate(theta_next, law_next) if law_role is not None else theta_next
         output = StepOutput(
             u_s=u_s, u_h=u_h, u_f=u_f, authority=decision.authority, set_class=decision.situation.overall,
             group=decision.group, role=decision.role, k_h=decision.k_h, k_f=decision.k_f, q_r=q_r,
-            theta_estimate=estimate, v_used=v_used, region_margins=feasible.region_margins(q),
+            theta_estimate=estimate, v_used=v_used, region_margins=feasible.region_margins(q, rows[0]),
         )
-        next_state = replace(state, arbiter=arbiter, theta_hat=theta_next, law_role=law_role, law_state=law_next, observer=observer_next)
-        if not np.all(np.isfinite(u_s)) or not np.all(np.isfinite(theta_next)) or not np.all(np.isfinite(law_next)):
+        next_state = ControllerState(arbiter, theta_next, law_role, law_next, observer_next)   # every field
+        if not (_finite(u_s) and _finite(theta_next) and _finite(law_next)):
             raise NonFiniteCommand("the shared controller produced a non-finite value")
         return next_state, output
+
+    def _zero_force(self) -> np.ndarray:
+        return np.zeros(self.model.n)
 
     recovery_damping: float = 40.0      # N s/m
     recovery_stiffness: float = 400.0   # N/m
@@ -142,6 +155,15 @@ class SharedController:
         no value (z = ln(x/x_r) needs x < 0): brake, and push back along the faces crossed."""
         excess = np.maximum(group.values(q) + self.reference.epsilon, 0.0)
         return -self.recovery_damping * v - self.recovery_stiffness * (group.K.T @ excess)
+
+
+_EMPTY = np.zeros(0)
+_EMPTY.flags.writeable = False
+
+
+def _finite(values: np.ndarray) -> bool:
+    """np.all(np.isfinite(values)) for short vectors, without an array reduction."""
+    return all(map(math.isfinite, values.tolist()))
 
 
 class NonFiniteCommand(ArithmeticError):

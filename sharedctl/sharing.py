@@ -35,7 +35,7 @@ from __future__ import annotations
 
 import enum
 import math
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -112,7 +112,8 @@ def _clear_of_faces(feasible: FeasibleSet, group: int | None, q: np.ndarray, ban
     """Every row of the group at least b1 inside its face (x_j ≤ −b1)."""
     if group is None:
         return True
-    return bool(np.all(feasible.groups[group].values(q) <= -bands.b1))
+    b1 = bands.b1
+    return all(xj <= -b1 for xj in feasible.groups[group].values(q).tolist())
 
 
 def select_group(feasible: FeasibleSet, situation: Situation, lyapunov, reference=None) -> int | None:
@@ -129,7 +130,7 @@ def select_group(feasible: FeasibleSet, situation: Situation, lyapunov, referenc
         if grp.region not in situation.region_class:
             continue
         rows = situation.hazard_rows[grp.region]
-        missed = len(set(rows) - set(grp.rows))
+        missed = len(set(rows) - feasible.group_row_sets[g]) if rows else 0
         value = lyapunov(g)
         if not math.isfinite(value):
             continue
@@ -150,14 +151,16 @@ def arbitrate(
     dt: float,
     lyapunov,
     reference: np.ndarray | None = None,
+    rows: tuple[list, list] | None = None,
 ) -> tuple[ArbiterState, Decision]:
     """One sample of the sharing function: classify, latch, select, blend.
 
     `v` is the measured velocity (state feedback, (46)) or the observer's v̂ (output
     feedback, (47)). `intent` is v_h of (45). `lyapunov(g)` is evaluated lazily; `reference`
-    holds every group's projected reference (see select_group).
+    holds every group's projected reference (see select_group). `rows`: the caller's
+    `feasible.row_values(q, v)`, if it has them already.
     """
-    situation = classify(feasible, q, v, params.bands)
+    situation = classify(feasible, q, v, params.bands, rows)
     overall = situation.overall
     mode = params.mode
 
@@ -219,8 +222,7 @@ def arbitrate(
         authority = Authority.SHARED
     k_f = 1.0 - k_h
 
-    new_state = replace(
-        state,
+    new_state = ArbiterState(      # every field (as dataclasses.replace would, without its overhead)
         machine_latched=latched,
         group=group,
         role=role,

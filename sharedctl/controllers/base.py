@@ -52,6 +52,21 @@ class MachineLaw(ABC):
         return theta_hat
 
 
+def cached_gain(owner, name: str, n: int) -> np.ndarray:
+    """diag_gain(owner.<name>, n), validated once and kept until the attribute's value changes
+    (a per-step constant; read-only, so no caller can alter the cached vector)."""
+    value = getattr(owner, name)
+    snapshot = value if isinstance(value, (int, float)) else tuple(np.ravel(value).tolist())
+    cache = owner.__dict__.setdefault("_gain_cache", {})
+    hit = cache.get((name, n))
+    if hit is not None and hit[0] == snapshot:
+        return hit[1]
+    vector = diag_gain(value, n)
+    vector.flags.writeable = False
+    cache[(name, n)] = (snapshot, vector)
+    return vector
+
+
 def diag_gain(value, n: int) -> np.ndarray:
     """A positive gain given as a scalar or a length-n list, as a vector."""
     arr = np.broadcast_to(np.asarray(value, dtype=float), (n,)).copy()

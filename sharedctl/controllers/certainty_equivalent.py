@@ -16,8 +16,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..transform import reference_acceleration, reference_velocity, z_dot
-from .base import LawOutput, MachineLaw, diag_gain
+from ..transform import reference_velocity_acceleration, z_dot
+from .base import LawOutput, MachineLaw, cached_gain, diag_gain
 
 
 @dataclass
@@ -38,14 +38,13 @@ class CertaintyEquivalentLaw(MachineLaw):
     def error_signals(self, model, group, c, q, v):
         """(p, ż, v_ref, v̇_ref) at one instant."""
         zd = z_dot(c, group.K @ v)
-        v_ref = reference_velocity(group, c, self.lam)
-        a_ref = reference_acceleration(group, c, zd, self.lam)
+        v_ref, a_ref = reference_velocity_acceleration(group, c, zd, self.lam)
         return v - v_ref, zd, v_ref, a_ref
 
     def evaluate(self, model, group, c, q, v, theta_hat, state) -> LawOutput:
         p, _, v_ref, a_ref = self.error_signals(model, group, c, q, v)
         Y = model.regressor(q, v, v_ref, a_ref)
-        kp = diag_gain(self.Kp, model.n)
+        kp = cached_gain(self, "Kp", model.n)
         u = -kp * p - group.K.T @ (c.z / c.x) + Y @ theta_hat
         theta_dot = -(Y.T @ p) / self.gamma_theta
         return LawOutput(u, theta_dot, np.zeros(0))

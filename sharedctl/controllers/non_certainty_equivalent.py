@@ -22,7 +22,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..transform import reference_acceleration, reference_velocity, z_dot
+from ..transform import reference_velocity_acceleration, z_dot
 from .base import LawOutput, MachineLaw
 
 
@@ -52,8 +52,7 @@ class NonCertaintyEquivalentLaw(MachineLaw):
 
     def _p(self, group, c, v):
         zd = z_dot(c, group.K @ v)
-        v_ref = reference_velocity(group, c, self.lam)
-        a_ref = reference_acceleration(group, c, zd, self.lam)
+        v_ref, a_ref = reference_velocity_acceleration(group, c, zd, self.lam)
         return v - v_ref, v_ref, a_ref
 
     def initial_state(self, model, group, c, q, v, theta_hat) -> np.ndarray:

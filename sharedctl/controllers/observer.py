@@ -15,7 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .base import diag_gain
+from .base import cached_gain
 from .smooth_sign import smooth_sign
 
 
@@ -33,15 +33,21 @@ class VelocityObserver:
         return np.concatenate([q0, v0])
 
     def _gains(self, n):
-        ka = diag_gain(self.Ka, n)
+        ka, kb = cached_gain(self, "Ka", n), cached_gain(self, "Kb", n)
+        checked = self.__dict__.get("_checked_gains")
+        if checked is not None and checked[0] is ka and checked[1] is kb:
+            return checked
         if np.any(ka <= 1.0):
             raise ValueError("observer needs K_a > 1 so that K_c = K_a − I is positive")
-        return ka, diag_gain(self.Kb, n), ka - 1.0
+        kc = ka - 1.0
+        kc.flags.writeable = False
+        self.__dict__["_checked_gains"] = (ka, kb, kc)
+        return ka, kb, kc
 
     def velocity(self, q: np.ndarray, state: np.ndarray) -> np.ndarray:
         """v̂ = β_o + K_a (q − q̂)."""
         n = q.size
-        ka = diag_gain(self.Ka, n)
+        ka = cached_gain(self, "Ka", n)
         return state[n:] + ka * (q - state[:n])
 
     def derivative(self, q: np.ndarray, state: np.ndarray) -> np.ndarray:

@@ -23,7 +23,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .base import LawOutput, MachineLaw, diag_gain
+from .base import LawOutput, MachineLaw, cached_gain
 from .smooth_sign import smooth_sign
 
 
@@ -52,10 +52,10 @@ class OutputFeedbackLaw(MachineLaw):
         k = self.k2 + 1.0
         r_f = xi - k * z
         ez = np.exp(z)
-        w = group.K_inv @ (ez * c.x_r_dot)
-        w0_dot = group.K_inv @ (ez * c.x_r_ddot)
+        both = group.K_inv @ np.array([ez * c.x_r_dot, ez * c.x_r_ddot]).T     # w, ẇ₀ in one product
+        w, w0_dot = both[:, 0], both[:, 1]
         Psi = model.regressor(q, w, w, w0_dot)
-        k1 = diag_gain(self.K1, n)
+        k1 = cached_gain(self, "K1", n)
         inner = -k1 * smooth_sign(z + z_f, self.sign_width) + k * r_f - z
         u = group.K.T @ (self.stiffness * inner / c.x) + Psi @ theta_hat
         z_f_dot = -z_f + r_f

@@ -64,6 +64,12 @@ class OmniRobot(EulerLagrangeModel):
         psi_dot = v[2]
         return np.array([[0.0, 0.0, psi_dot * w[1]], [0.0, 0.0, -psi_dot * w[0]], [0.0, 0.0, 0.0]])
 
+    def regressor(self, q, v, w, a):
+        """Y = Y_M(a) + Y_C(v, w) + Y_g, written out (g = 0): one array instead of three and two sums."""
+        a0, a1, a2 = a.tolist()
+        psi_dot = float(v[2])
+        return np.array([[a0, 0.0, psi_dot * float(w[1])], [a1, 0.0, -psi_dot * float(w[0])], [0.0, a2, 0.0]])
+
     def gravity_regressor(self, q):
         return np.zeros((3, 3))
 
