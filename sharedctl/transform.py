@@ -24,7 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .constraints import ConstraintGroup, GroupStack
-from .reference import ReferenceShape, projected_reference, saturate
+from .reference import ReferenceShape, saturate
 
 
 @dataclass(frozen=True)
