@@ -82,6 +82,12 @@ class Case:
                 return value[0], WATCHDOG
         return None
 
+    def fault_time(self) -> float | None:
+        """When the earliest timed fault (a process fault, a bus-off, a blackout) lands; None if none is timed."""
+        times = [v[0] for spec in self.faults for key in (spec.partition("=")[0],)
+                 if key.endswith(("kill_at", "stop_at", ".busoff", ".blackout")) for v in [self.fault_value(key)] if v]
+        return min(times) if times else None
+
     def short_hang(self) -> tuple[float, float] | None:
         """(START, DURATION) of a controller hang too short to trip the watchdog (a transient loop delay)."""
         value = self.fault_value("controller.stop_at")
@@ -330,11 +336,13 @@ def judge(case: Case, result: RunResult, forecasts=None) -> dict:
     host = host_figures(result.log_dir)
     # an estop the demo's observer did not see (before it connected) still shows in the controller's count
     estops = max(estops, int((host or {}).get("controller_estops", 0)))
-    early = [t for t in _estop_times(s) if t < 0.0] or (estops and not _estop_times(s))
+    # an estop before the run's start, or before a timed fault lands: the fault met a robot already stopping
+    landing = max(case.fault_time() or 0.0, 0.0)
+    early = [t for t in _estop_times(s) if t < landing] or (estops and not _estop_times(s))
     if result.summary is None or truth == 0:
         outcome = "error"
     elif early and not violations:
-        outcome = "not exercised"    # an estop before the run's start: the robot never moved, the fault met no motion
+        outcome = "not exercised"
     elif violations:
         outcome = "violation"
     elif estops:

@@ -162,6 +162,15 @@ def test_a_run_estopped_before_its_start_is_run_again_once():
     assert cp.aggregate(rows)["not_exercised"] == [rows[1]["id"]]
 
 
+def test_an_estop_before_a_timed_fault_lands_leaves_the_fault_not_exercised():
+    case = cp.Case("adversarial_wall", ("controller.stop_at=1.5,1",))
+    assert case.fault_time() == 1.5 and cp.Case("adversarial_wall", ("can.loss=0.1",)).fault_time() is None
+    before = dict(_summary(), estops=1, event_log=[{"t": 0.7, "kind": "estop"}])
+    after = dict(_summary(), estops=1, event_log=[{"t": 1.6, "kind": "estop"}])
+    assert cp.judge(case, cp.RunResult(before, 0, 1.0))["outcome"] == "not exercised"
+    assert cp.judge(case, cp.RunResult(after, 0, 1.0))["outcome"] == "estop"
+
+
 def test_campaign_stops_when_asked():
     calls = []
     rows = cp.run_campaign(cp.plan(quick=True), lambda c, i: calls.append(i) or cp.RunResult(_summary(), 0, 1.0),
