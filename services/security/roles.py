@@ -13,9 +13,13 @@ mutual TLS, a client certificate whose common name is the role) and the router's
     observer    nothing: subscribes only
 
 What every authenticated role may *read*: declare subscribers (and liveliness subscribers and
-queries) on `sharedctl/**`, and receive publications, liveliness tokens and declarations there
-(flow `egress` for deliveries). Deliveries of a query go only to the controller (the lease's
-queryable) and replies only to the operator. Keys are matched with `*` in the robot-id chunk, so
+queries) on `sharedctl/**`, and receive liveliness tokens and declarations there and the
+publications of state, events, heartbeats and ground truth (flow `egress` for deliveries).
+Operator commands are delivered only to the controller and to observers (recorders): an operator
+never sees another operator's commands, so it cannot learn the session id it would need to pass
+for that operator (every operator shares the role's credentials; the controller's lease and
+replay guard key on operator and session id). Deliveries of a query go only to the controller
+(the lease's queryable) and replies only to the operator. Keys are matched with `*` in the robot-id chunk, so
 one router serves several robots with the same rules. A message nobody allowed is dropped by the
 router without an error at the sender (Zenoh's ACL gives no feedback; the router logs it at
 debug level).
@@ -64,13 +68,15 @@ WRITES: dict[str, dict[str, tuple[str, ...]]] = {
 # role -> {message kind: key expressions delivered to it (flow egress) beyond the common reads}
 DELIVERIES: dict[str, dict[str, tuple[str, ...]]] = {
     "operator": {"reply": (f"{PREFIX}/control/lease",)},
-    "controller": {"query": (f"{PREFIX}/control/lease",)},
+    "controller": {"query": (f"{PREFIX}/control/lease",), "put": (f"{PREFIX}/operator/cmd",)},
     "robot": {},
-    "observer": {},
+    "observer": {"put": (f"{PREFIX}/operator/cmd",)},
 }
 
 READ_INGRESS = ("declare_subscriber", "declare_liveliness_subscriber", "liveliness_query")
-READ_EGRESS = ("put", "liveliness_token", "declare_subscriber", "declare_queryable")
+READ_EGRESS = ("liveliness_token", "declare_subscriber", "declare_queryable")
+# publications every role receives: everything but operator commands (Zenoh's ACL has no "except")
+READ_PUTS = (f"{PREFIX}/state", f"{PREFIX}/events", f"{PREFIX}/alive/*", f"{PREFIX}/truth")
 
 
 def _rule(rule_id: str, flow: str, messages, key_exprs) -> dict:
@@ -106,7 +112,8 @@ def access_control(roles=ROLES, tls: bool = False, usrpwd: bool = True) -> dict:
     role's certificate and the role's password (Zenoh takes the product of the lists)."""
     roles = [check_role_name(r) for r in roles]
     read = [_rule("read-declare", "ingress", READ_INGRESS, [ALL_KEYS]),
-            _rule("read-deliver", "egress", READ_EGRESS, [ALL_KEYS])]
+            _rule("read-deliver", "egress", READ_EGRESS, [ALL_KEYS]),
+            _rule("read-deliver-put", "egress", ["put"], READ_PUTS)]
     rules = list(read)
     policies = []
     subjects = []

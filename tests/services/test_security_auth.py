@@ -119,7 +119,7 @@ class Inbox:
             return self.payloads.count(payload)
 
 
-def _publish_both(creds, endpoint, key, writer_role, intruder_role, listener_role, n=20):
+def _publish_both(creds, endpoint, key, writer_role, intruder_role, listener_role, n=20, expect_writer=True):
     """`writer` and `intruder` each put n samples on `key`; what does `listener` receive?"""
     sessions = [_open(_client(r, creds, endpoint)) for r in (listener_role, writer_role, intruder_role)]
     listener, writer, intruder = sessions
@@ -133,8 +133,11 @@ def _publish_both(creds, endpoint, key, writer_role, intruder_role, listener_rol
             intruder.put(key, b"intruder")
             writer.put(key, b"writer")
             time.sleep(0.005)
-        wait_for(lambda: inbox.count(b"writer") == n, 5.0, "the writer's samples")
-        time.sleep(0.2)     # anything else in flight
+        if expect_writer:
+            wait_for(lambda: inbox.count(b"writer") == n, 5.0, "the writer's samples")
+            time.sleep(0.2)     # anything else in flight
+        else:
+            time.sleep(1.0)     # long enough for n samples to arrive, were they delivered
         probe.undeclare()
         sub.undeclare()
         return inbox.count(b"writer"), inbox.count(b"intruder")
@@ -149,6 +152,17 @@ def test_observer_cannot_publish_operator_commands(creds, tcp_router):
                                                listener_role="controller")
     assert got_operator == 20
     assert got_observer == 0
+
+
+def test_an_operator_never_receives_another_operators_commands(creds, tcp_router):
+    """Operators share the role's credentials; hiding the command stream hides the session ids."""
+    key = keys.operator_cmd_key(ROBOT)
+    got_by_operator = _publish_both(creds, tcp_router, key, writer_role="operator", intruder_role="operator",
+                                    listener_role="operator", expect_writer=False)
+    got_by_observer = _publish_both(creds, tcp_router, key, writer_role="operator", intruder_role="operator",
+                                    listener_role="observer")
+    assert got_by_operator == (0, 0)
+    assert got_by_observer == (20, 20)
 
 
 def test_operator_cannot_publish_robot_state(creds, tcp_router):
