@@ -224,8 +224,10 @@ class ConsoleApp:
                 if live is not None:
                     live.stop()
                     live = None
-            sender.join(timeout=1.0)
-            leaser.join(timeout=1.0)
+            # both are daemon threads; a lease query still waiting for a controller that is gone
+            # ends when the session closes, so the console does not wait out its timeout here
+            sender.join(timeout=0.2)
+            leaser.join(timeout=0.2)
             for sub in subscribers:
                 sub.undeclare()
             publisher.undeclare()
