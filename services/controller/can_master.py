@@ -26,6 +26,7 @@ from sharedctl.protocol.canframe import DEFAULT_WHEEL_NODES
 from sharedctl.protocol.errors import ProtocolError
 from sharedctl.protocol.odrive_enums import AxisState, ControlMode, InputMode, ODriveError
 
+from .encoder_check import EncoderCheck
 from .odometry import AxisEstimate
 
 HOST_FRAMES = (
@@ -43,6 +44,7 @@ class AxisStatus:
     error: ODriveError = ODriveError.NONE
     heartbeat_at: float = float("-inf")        # s, when the last heartbeat arrived
     estimate: AxisEstimate | None = None
+    positions_rejected_in_a_row: int = 0
 
 
 @dataclass(frozen=True)
@@ -66,6 +68,8 @@ class CanMaster:
     tx_frames: int = 0
     echoes_ignored: int = 0
     bad_frames: Counter = field(default_factory=Counter)
+    encoder_check: EncoderCheck = field(default_factory=EncoderCheck)
+    implausible_estimates: Counter = field(default_factory=Counter)   # values replaced, by reason
     tx_errors: Counter = field(default_factory=Counter)
     arm_attempts: int = 0
     arm_requested_at: float | None = None
@@ -180,7 +184,12 @@ class CanMaster:
             return
         axis = self.axes[frame.node_id]
         if isinstance(frame, cs.GetEncoderEstimates):
-            axis.estimate = AxisEstimate(frame.pos_estimate, frame.vel_estimate, now)
+            axis.estimate, reason = self.encoder_check.judge(axis.estimate, frame.pos_estimate, frame.vel_estimate,
+                                                             now, axis.positions_rejected_in_a_row)
+            if reason is not None:
+                self.implausible_estimates[reason] += 1
+            axis.positions_rejected_in_a_row = (axis.positions_rejected_in_a_row + 1
+                                                if reason == "implausible_position" else 0)
         elif isinstance(frame, cs.Heartbeat):
             self._heartbeat(axis, frame, now)
 

@@ -116,6 +116,7 @@ class Summary:
     frames_rx: int = 0
     frames_tx: int = 0
     bad_frames: int = 0
+    implausible_estimates: int = 0
     commands_accepted: int = 0
     rejections: dict = field(default_factory=dict)
     estops: int = 0
@@ -130,7 +131,8 @@ class Summary:
             f"{self.missed} missed / {self.late} late deadlines, jitter p50 {self.jitter_p50_ms:.3f} ms "
             f"p99 {self.jitter_p99_ms:.3f} ms max {self.jitter_max_ms:.2f} ms, compute p50 {self.compute_p50_ms:.3f} ms "
             f"p99 {self.compute_p99_ms:.3f} ms, CPU {self.cpu_percent:.0f}% of one core; "
-            f"CAN frames rx {self.frames_rx} tx {self.frames_tx} bad {self.bad_frames}; operator commands "
+            f"CAN frames rx {self.frames_rx} tx {self.frames_tx} bad {self.bad_frames}, implausible encoder values "
+            f"{self.implausible_estimates}; operator commands "
             f"{self.commands_accepted} accepted, {rej} rejected{f' ({detail})' if detail else ''}; "
             f"estops {self.estops}, torque-limited ticks {self.saturated}"
         )
@@ -276,6 +278,7 @@ class ControllerDaemon:
             compute_p50_ms=self.compute.quantile(0.5) * 1e3, compute_p99_ms=self.compute.quantile(0.99) * 1e3,
             frames_rx=self.master.rx_frames,
             frames_tx=self.master.tx_frames, bad_frames=self.master.bad_frame_count,
+            implausible_estimates=sum(self.master.implausible_estimates.values()),
             commands_accepted=self.policy.accepted, rejections=dict(self.policy.rejections), estops=self.estops,
             saturated=self.saturated, mode=self.mode.value,
         )

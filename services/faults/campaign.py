@@ -13,7 +13,7 @@ on the simulator's ground truth, aggregated into one result.
 Every row is judged on the ground truth (violations, min_margin) and against the safety policy
 of docs/safety.md: a violation is *documented* only when the run lost actuation (a controller
 kill or hang, a CAN bus-off, or an estop) at a moment when the stopping-distance forecast
-(stopping.py, on the robot's true plant) says the coasting robot leaves the set; any other
+(stopping.py, on the robot's true plant) says the braking (disarmed) robot leaves the set; any other
 violation is *unexpected* (likewise a CAN delay whose torque-loop delay the in-process
 forecast puts beyond the measured delay limit), and `aggregate(...)["ok"]` is False.
 """
@@ -353,7 +353,7 @@ def judge(case: Case, result: RunResult, forecasts=None) -> dict:
     if violations:
         if forecast is not None and forecast["worst_min_margin"] < 0.0:
             explained = (f"actuation lost at {forecast['approach_speed']:.2f} m/s toward a face "
-                         f"{forecast['margin']:.2f} m away: the coasting robot leaves the set (forecast)")
+                         f"{forecast['margin']:.2f} m away: the disarmed robot cannot stop short of it (forecast)")
         elif delayed is not None and delayed["worst_min_margin"] < 0.0:
             what = (f"torque loop delayed by {1e3 * lag:.0f} ms or more" if lag else
                     f"controller hung {1e3 * hang[1]:.0f} ms at {hang[0]:g} s (torque held)")
@@ -365,7 +365,7 @@ def judge(case: Case, result: RunResult, forecasts=None) -> dict:
                                f"{host['robot_physics_steps']:.0f} ticks (stalls caught up with the torque held: a "
                                f"torque-loop delay beyond the limit of docs/safety.md §3)")
             if estop_first:
-                reasons.append(f"estop at {estop_first[0]:.2f} s before the first violation: coasting")
+                reasons.append(f"estop at {estop_first[0]:.2f} s before the first violation: a braked stop too long for the margin")
             explained = "; ".join(reasons) or None
     min_margin = s.get("min_margin")
     return {
@@ -441,6 +441,8 @@ def rejudge(rows: list[dict], logs: Path, forecasts=None) -> list[dict]:
 
 
 def write_json(path: Path, result: dict) -> None:
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
     tmp = Path(f"{path}.tmp")
     tmp.write_text(json.dumps(result, indent=1, default=_jsonable) + "\n")
     tmp.replace(path)

@@ -112,7 +112,7 @@ def markdown(result: dict, plots: list[str], title: str = "Fault campaign") -> s
         lines.append(f"* `{r['id']}`: {r['violations']} samples outside, first at {_fmt(r['first_violation_t'], 2)} s, "
                      f"min margin {_fmt(r['min_margin'])} m; "
                      + (f"forecast: speed {_fmt(fc.get('speed'), 2)} m/s at the fault, margin {_fmt(fc.get('margin'))} m, "
-                        f"coasting to {_fmt(fc.get('min_margin'))} m; " if "speed" in fc else
+                        f"braking to {_fmt(fc.get('min_margin'))} m; " if "speed" in fc else
                         f"in-process forecast {_fmt(fc.get('worst_min_margin'))} m; " if fc else "")
                      + (r["explained"] or "**not explained by the documented limits**"))
     lines += ["", "## Every run", "",
@@ -229,14 +229,18 @@ def _stopping(path: Path) -> Path:
     push = 20.0 / float(plant.model.theta[0])
     v = np.linspace(0.0, 1.5, 151)
     fig, ax = plt.subplots(figsize=(7.5, 4.5))
-    ax.plot(v, [model.stopping_distance(x) for x in v], label="D(v): last torque 0, watchdog 0.1 s, coasting")
+    ax.plot(v, [model.stopping_distance(x) for x in v], label="D(v): last torque 0, watchdog 0.1 s, then braking")
     ax.plot(v, [model.stopping_distance(x, 0.1, push) for x in v], label="D(v): operator's 20 N push held 0.1 s")
+    unbraked = worst_coast_model(Plant(OmniRobot(), RobotSimConfig(brake_torque=0.0)))
+    ax.plot(v, [unbraked.stopping_distance(x) for x in v], ls="--", color="grey",
+            label="D(v) without brakes (wheel friction only)")
     for d, name in ((0.025, "b0"), (0.3, "b1"), (0.6, "b2")):
         ax.axhline(d, color="grey", lw=0.8, ls=":")
         ax.text(0.01, d, f" {name} = {d:g} m", va="bottom", fontsize=8, color="grey")
     ax.set_xlabel("speed toward the face when the drives stop driving (m/s)")
     ax.set_ylabel("distance to rest (m)")
-    ax.set_title("stopping distance of the unpowered robot (wheel friction only)")
+    ax.set_title("stopping distance of the disarmed robot (fail-safe brakes)")
+    ax.set_ylim(0.0, 1.0)
     ax.legend(fontsize=8)
     fig.tight_layout()
     fig.savefig(path, dpi=110)

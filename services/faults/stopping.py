@@ -1,14 +1,15 @@
 """Stopping distance of the simulated robot when the drives stop driving, and what it predicts for a fault.
 
 When the controller dies, hangs or loses the bus, every axis keeps its last torque setpoint until
-its watchdog expires (T_w = 0.1 s) and then goes IDLE: no torque, no brake. The robot coasts and
-only the wheels' friction (services/robot/plant.py) slows it. For a translation at speed v along
+its watchdog expires (T_w = 0.1 s) and then goes IDLE: no torque, and its wheel's fail-safe brake
+engages (a Coulomb torque c_b per wheel, services/robot/plant.py; c_b = 0 for a robot without
+brakes, which only the wheels' friction slows). An estop disarms at once (T_w = 0). For a translation at speed v along
 a unit direction e (yaw ψ = 0), the wheel speeds are ω_j = (b_j·e) v with b_j the j-th column of
 B(ψ)'s translational rows, and the friction decelerates the body by
 
-    a(v) = a_c + k v,   a_c = c Σ_j |b_j·e| / m1,   k = b Σ_j (b_j·e)² / m1 = 3b / (2 r² m1)
+    a(v) = a_c + k v,   a_c = (c + c_b) Σ_j |b_j·e| / m1,   k = b Σ_j (b_j·e)² / m1 = 3b / (2 r² m1)
 
-(c: Coulomb torque, b: viscous coefficient per wheel, m1 the model's translational inertia;
+(c: Coulomb torque, c_b: brake torque, b: viscous coefficient per wheel, m1 the model's translational inertia;
 Σ_j (b_j·e)² = 3/(2r²) for every direction, Σ_j |b_j·e| lies between √3/r and 2/r, least along
 y). Integrating v dv/dx = −(a_c + k v) from v to 0 gives the coasting distance
 
@@ -79,20 +80,22 @@ class CoastModel:
         return lo
 
 
-def coast_model(plant: Plant, direction=(0.0, 1.0), psi: float = 0.0) -> CoastModel:
-    """a_c and k of `plant` for a translation along `direction` (x, y) at yaw `psi`."""
+def coast_model(plant: Plant, direction=(0.0, 1.0), psi: float = 0.0, braked: bool = True) -> CoastModel:
+    """a_c and k of `plant` for a translation along `direction` (x, y) at yaw `psi`, with the
+    drives disarmed (their brakes engaged, if the plant has any; `braked=False`: friction only)."""
     e = np.asarray(direction, float)
     e = e / np.linalg.norm(e)
     B = plant.model.input_matrix(np.array([0.0, 0.0, psi]))
     proj = B[:2, :].T @ e                       # b_j·e, rad/m per wheel
     m1 = float(plant.model.theta[0])
-    c, b = plant.config.friction_coulomb, plant.config.friction_viscous
+    c = plant.config.friction_coulomb + (plant.config.brake_torque if braked else 0.0)
+    b = plant.config.friction_viscous
     return CoastModel(coulomb=c * float(np.sum(np.abs(proj))) / m1, viscous=b * float(np.sum(proj * proj)) / m1)
 
 
-def worst_coast_model(plant: Plant) -> CoastModel:
+def worst_coast_model(plant: Plant, braked: bool = True) -> CoastModel:
     """The least deceleration over all directions (Σ|b_j·e| = √3/r, along ±y at ψ = 0)."""
-    samples = [coast_model(plant, (math.cos(a), math.sin(a))) for a in np.linspace(0.0, math.pi, 181)]
+    samples = [coast_model(plant, (math.cos(a), math.sin(a)), braked=braked) for a in np.linspace(0.0, math.pi, 181)]
     return min(samples, key=lambda m: m.coulomb)
 
 
@@ -147,13 +150,15 @@ def sampled_loop(scenario, duration: float, controller: str | None = None, perio
 
 def coast(plant: Plant, feasible, q, qd, tau_hold, hold: float = WATCHDOG, dt: float = 1e-3,
           rest_speed: float = 1e-3, max_time: float = 30.0):
-    """Hold `tau_hold` for `hold` s, then zero torque until at rest: (min margin, path length, time)."""
+    """Hold `tau_hold` for `hold` s, then disarmed (zero torque, brakes engaged) until at rest:
+    (min margin, path length, time)."""
     ps = plant.initial_state(q, qd)
     zero = (0.0, 0.0, 0.0)
+    off, braked = zero, plant.brake_torques((True, True, True))
     min_margin, path, t = feasible.margin(ps.q), 0.0, 0.0
     while t < max_time:
-        tau = tau_hold if t < hold else zero
-        nxt = plant.step(ps, tau, dt)
+        tau, brakes = (tau_hold, off) if t < hold else (zero, braked)
+        nxt = plant.step(ps, tau, dt, brakes)
         path += float(np.linalg.norm(nxt.q[:2] - ps.q[:2]))
         ps, t = nxt, t + dt
         min_margin = min(min_margin, feasible.margin(ps.q))

@@ -2,13 +2,20 @@
 
     M q̈ + C(q, q̇) q̇ = B(ψ) (τ_drive − τ_friction),   ω = B(ψ)ᵀ q̇   (the paper's omni3 model),
     τ_friction,j = b ω_j + c tanh(ω_j / ω_s)      (viscous + regularised Coulomb, per wheel),
+    τ_brake,j    = c_b tanh(ω_j / ω_b) on a wheel whose drive is disarmed (fail-safe brake),
     τ_drive = clamp(τ, ±torque_limit), and 0 on a wheel already beyond the speed limit whose
               torque would push it further (the drive gives no further accelerating torque),
     d(wheel turns)/dt = ω / 2π.
 
 Pure: no clocks, no I/O. `step(state, tau, dt)` is one RK4 step with τ held over the step.
-When the drives produce no torque (watchdog trip, estop, idle) the robot coasts and friction
-brings it to rest; there is no short-circuit brake.
+When a drive is disarmed (idle, watchdog trip, estop, any fault) its wheel's fail-safe brake
+engages, as an ODrive does with a mechanical brake on a GPIO ("when the drive enters a fault or
+idle state, the brake will be re-engaged"; power-off, active-low brakes engage on power loss
+too): a regularised Coulomb torque c_b = `brake_torque` per wheel. The default, 1.0 N·m, stops
+the robot at about 2.4 m/s² — below the traction limit of its 9.85 kg body on wheels with a
+friction coefficient ≥ 0.6 (the model has no wheel slip). `brake_torque = 0` is a robot without
+brakes: it coasts on wheel friction alone (about 0.12 m/s²; docs/safety.md shows why the set is
+then left after a loss of the drives at speed).
 """
 from __future__ import annotations
 
@@ -32,6 +39,8 @@ class RobotSimConfig:
 
     friction_viscous: float = 0.01       # b, N·m·s/rad per wheel
     friction_coulomb: float = 0.05       # c, N·m per wheel
+    brake_torque: float = 1.0            # c_b, N·m per wheel while its drive is disarmed (0: no brake)
+    brake_smoothing: float = 0.2         # ω_b, rad/s (the brake's tanh width: stable at 1 kHz RK4)
     coulomb_smoothing: float = 0.05      # ω_s, rad/s (width of the tanh in the Coulomb term)
     torque_limit: float = 60.0           # N·m per wheel
     wheel_speed_limit: float = 60.0      # rad/s per wheel
@@ -56,7 +65,7 @@ class RobotSimConfig:
             if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
                 raise RobotSimConfigError(f"robot_sim.{key} must be a finite number, got {value!r}")
             value = float(value)
-            if key in ("friction_viscous", "friction_coulomb", "watchdog_timeout"):
+            if key in ("friction_viscous", "friction_coulomb", "watchdog_timeout", "brake_torque"):
                 if value < 0:
                     raise RobotSimConfigError(f"robot_sim.{key} must be >= 0, got {value}")
             elif value <= 0:
@@ -125,7 +134,7 @@ class Plant:
             out.append(0.0 if (abs(w) >= speed_limit and t * w > 0) else t)
         return tuple(out)
 
-    def _derivative(self, q, qd, tau_drive):
+    def _derivative(self, q, qd, tau_drive, brakes=(0.0, 0.0, 0.0)):
         """(q̇, q̈, d turns/dt) as float tuples; B(ψ) written out as in OmniRobot.input_matrix.
 
         Plain floats rather than 3×3 numpy arrays: this runs 4000 times a second in real time.
@@ -143,14 +152,25 @@ class Plant:
         t0 = tau_drive[0] - (b * w0 + c * math.tanh(w0 / ws))
         t1 = tau_drive[1] - (b * w1 + c * math.tanh(w1 / ws))
         t2 = tau_drive[2] - (b * w2 + c * math.tanh(w2 / ws))
+        if brakes[0] or brakes[1] or brakes[2]:
+            wb = self.config.brake_smoothing
+            t0 -= brakes[0] * math.tanh(w0 / wb)
+            t1 -= brakes[1] * math.tanh(w1 / wb)
+            t2 -= brakes[2] * math.tanh(w2 / wb)
         u0 = (-s1 * t0 - s2 * t1 + cp * t2) / r
         u1 = (c1 * t0 - c2 * t1 + sp * t2) / r
         u2 = L * (t0 + t1 + t2) / r
         qdd = ((u0 - self._a * w * vy) / self._m1, (u1 + self._a * w * vx) / self._m1, u2 / self._m3)
         return qd, qdd, (w0 / TWO_PI, w1 / TWO_PI, w2 / TWO_PI)
 
-    def step(self, state: PlantState, tau, dt: float) -> PlantState:
-        """One RK4 step of length dt (s) with the commanded wheel torques τ (N·m) held."""
+    def brake_torques(self, engaged) -> tuple[float, float, float]:
+        """c_b on each wheel whose brake is engaged (its drive disarmed), else 0."""
+        c_b = self.config.brake_torque
+        return tuple(c_b if e else 0.0 for e in engaged)
+
+    def step(self, state: PlantState, tau, dt: float, brakes=(0.0, 0.0, 0.0)) -> PlantState:
+        """One RK4 step of length dt (s) with the commanded wheel torques τ (N·m) and the brake
+        torques (N·m, `brake_torques(engaged)`) held."""
         q = tuple(float(v) for v in state.q)
         qd = tuple(float(v) for v in state.qd)
         tau_drive = self.drive_torque(tau, self._omega(q, qd))
@@ -159,10 +179,10 @@ class Plant:
         def shift(x, k, f):
             return (x[0] + f * k[0], x[1] + f * k[1], x[2] + f * k[2])
 
-        k1 = self._derivative(q, qd, tau_drive)
-        k2 = self._derivative(shift(q, k1[0], h), shift(qd, k1[1], h), tau_drive)
-        k3 = self._derivative(shift(q, k2[0], h), shift(qd, k2[1], h), tau_drive)
-        k4 = self._derivative(shift(q, k3[0], dt), shift(qd, k3[1], dt), tau_drive)
+        k1 = self._derivative(q, qd, tau_drive, brakes)
+        k2 = self._derivative(shift(q, k1[0], h), shift(qd, k1[1], h), tau_drive, brakes)
+        k3 = self._derivative(shift(q, k2[0], h), shift(qd, k2[1], h), tau_drive, brakes)
+        k4 = self._derivative(shift(q, k3[0], dt), shift(qd, k3[1], dt), tau_drive, brakes)
         w = dt / 6.0
         incr = [[w * (k1[i][j] + 2.0 * k2[i][j] + 2.0 * k3[i][j] + k4[i][j]) for j in range(3)] for i in range(3)]
         q_new = np.array([q[j] + incr[0][j] for j in range(3)])

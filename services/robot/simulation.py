@@ -87,7 +87,8 @@ class RobotSimulation:
                 self.skipped_time += now - self.time
                 self.time = now
                 break
-            self.state = self.plant.step(self.state, self.applied_torques(), self.dt)
+            brakes = self.plant.brake_torques([not axis.armed for axis in self.axes])
+            self.state = self.plant.step(self.state, self.applied_torques(), self.dt, brakes)
             self.time += self.dt
             self.steps += 1
             steps += 1

@@ -112,7 +112,7 @@ def test_a_violation_without_a_loss_of_actuation_is_unexpected():
 def test_a_violation_after_a_kill_at_speed_is_the_documented_limit():
     case = cp.Case("adversarial_wall", ("controller.kill_at=2",))
     row = cp.judge(case, cp.RunResult(_summary(40, -0.9, first=2.6), 1, 9.0), _forecast(-1.1))
-    assert row["documented"] is True and "coasting" in row["explained"]
+    assert row["documented"] is True and "cannot stop short" in row["explained"]
     safe_forecast = cp.judge(case, cp.RunResult(_summary(40, -0.9, first=2.6), 1, 9.0), _forecast(0.2))
     assert safe_forecast["documented"] is False
 
@@ -204,21 +204,30 @@ def plant():
     return Plant(OmniRobot(), RobotSimConfig())
 
 
-def test_coast_deceleration_matches_the_plant_friction(plant):
-    model = stopping.coast_model(plant, (0.0, 1.0))
+def test_coast_deceleration_matches_the_plant_friction_and_brakes(plant):
     m1 = float(plant.model.theta[0])
     r, delta = plant.model.parameters.wheel_radius, plant.model.parameters.delta
-    assert model.coulomb == pytest.approx(plant.config.friction_coulomb * 2 * math.cos(delta) / r / m1)
-    assert model.viscous == pytest.approx(1.5 * plant.config.friction_viscous / r**2 / m1)
-    assert stopping.worst_coast_model(plant).coulomb == pytest.approx(model.coulomb, rel=1e-3)
+    cfg = plant.config
+    braked, unbraked = stopping.coast_model(plant, (0.0, 1.0)), stopping.coast_model(plant, (0.0, 1.0), braked=False)
+    assert braked.coulomb == pytest.approx((cfg.friction_coulomb + cfg.brake_torque) * 2 * math.cos(delta) / r / m1)
+    assert unbraked.coulomb == pytest.approx(cfg.friction_coulomb * 2 * math.cos(delta) / r / m1)
+    assert braked.viscous == unbraked.viscous == pytest.approx(1.5 * cfg.friction_viscous / r**2 / m1)
+    assert stopping.worst_coast_model(plant).coulomb == pytest.approx(braked.coulomb, rel=1e-3)
 
 
+@pytest.mark.parametrize("brake_torque", [0.0, 1.0])
 @pytest.mark.parametrize("speed", [0.2, 1.0])
-def test_coasting_distance_formula_agrees_with_the_plant(plant, speed):
+def test_stopping_distance_formula_agrees_with_the_plant(speed, brake_torque):
+    plant = Plant(OmniRobot(), RobotSimConfig(brake_torque=brake_torque))
     feasible = load("paper_convex").closed_loop(None)[0].feasible
     _, path, _ = stopping.coast(plant, feasible, np.array([0.0, 2.0, 0.0]), np.array([0.0, speed, 0.0]),
                                 (0.0, 0.0, 0.0), hold=0.0)
     assert path == pytest.approx(stopping.coast_model(plant, (0.0, 1.0)).coast_distance(speed), rel=0.03)
+
+
+def test_the_brakes_shorten_the_stop_from_1_m_s_more_than_fourfold(plant):
+    unbraked = Plant(OmniRobot(), RobotSimConfig(brake_torque=0.0))
+    assert stopping.worst_coast_model(unbraked).stopping_distance(1.0) > 4 * stopping.worst_coast_model(plant).stopping_distance(1.0)
 
 
 @pytest.mark.parametrize("distance", [0.025, 0.3, 0.6, 2.0])
@@ -234,10 +243,21 @@ def test_torque_loop_delay_erodes_the_margin_until_it_is_violated():
     assert margins[0] > 0.01 and margins[1] < 0.0
 
 
-def test_controller_loss_at_speed_leaves_the_set_and_at_low_speed_does_not():
-    samples, plant, feasible = stopping.sampled_loop(load("adversarial_wall"), 2.05)
+def test_controller_loss_at_speed_close_to_a_face_leaves_the_set_and_further_away_does_not():
+    samples, plant, feasible = stopping.sampled_loop(load("adversarial_wall"), 2.35)
     slow = stopping.forecast(samples, plant, feasible, 0.5)
-    fast = stopping.forecast(samples, plant, feasible, 2.0)
+    early = stopping.forecast(samples, plant, feasible, 2.0)     # 1.2 m/s, 0.57 m from the face
+    late = stopping.forecast(samples, plant, feasible, 2.3)      # 1.3 m/s, 0.19 m from the face
     assert slow.min_margin > 0.2 and slow.speed < 0.6
-    assert fast.approach_speed > 1.0 and fast.min_margin < -0.5
-    assert fast.travelled == pytest.approx(fast.predicted_distance, rel=0.1)
+    assert early.approach_speed > 1.0 and early.min_margin > 0.1
+    assert late.approach_speed > 1.0 and late.min_margin < -0.1
+    for outcome in (early, late):
+        assert outcome.travelled == pytest.approx(outcome.predicted_distance, rel=0.1)
+
+
+def test_without_brakes_the_same_early_loss_coasts_out_of_the_set():
+    samples, _, feasible = stopping.sampled_loop(load("adversarial_wall"), 2.05)
+    unbraked = Plant(OmniRobot(), RobotSimConfig(brake_torque=0.0))
+    coasting = stopping.forecast(samples, unbraked, feasible, 2.0)
+    assert coasting.min_margin < -0.5
+    assert coasting.travelled == pytest.approx(coasting.predicted_distance, rel=0.1)

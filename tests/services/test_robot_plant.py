@@ -78,6 +78,24 @@ def test_friction_never_adds_energy_while_coasting():
     assert all(b <= a + 1e-12 for a, b in zip(energies, energies[1:]))
 
 
+def test_engaged_brakes_stop_the_robot_from_1_m_s_within_0_3_m_and_never_add_energy():
+    plant = Plant(OmniRobot())
+    brakes = plant.brake_torques((True, True, True))
+    state = plant.initial_state([0, 0, 0], [0.0, 1.0, 0.0])
+    energies, y0 = [], float(state.q[1])
+    for _ in range(1000):
+        state = plant.step(state, np.zeros(3), DT, brakes)
+        energies.append(plant.kinetic_energy(state))
+    assert all(b <= a + 1e-12 for a, b in zip(energies, energies[1:]))
+    assert np.max(np.abs(state.qd)) < 1e-3
+    assert 0.1 < float(state.q[1]) - y0 < 0.3          # friction alone: about 1.2 m
+
+
+def test_a_robot_without_brakes_has_no_brake_torque():
+    assert Plant(OmniRobot(), RobotSimConfig(brake_torque=0.0)).brake_torques((True, True, True)) == (0.0, 0.0, 0.0)
+    assert Plant(OmniRobot()).brake_torques((False, True, False)) == (0.0, 1.0, 0.0)
+
+
 def test_without_friction_kinetic_energy_grows_by_the_work_of_the_wheel_torques():
     plant = Plant(OmniRobot(), FRICTIONLESS)
     tau = np.array([0.2, 0.1, -0.3])

@@ -60,15 +60,16 @@ def test_armed_torque_turns_the_wheels_forwards():
     assert sim.state.qd[2] > 0                          # equal wheel torques: positive yaw rate
 
 
-def test_watchdog_trip_leaves_the_robot_coasting_to_rest():
+def test_watchdog_trip_disarms_and_the_brakes_bring_the_robot_to_rest():
     sim = simulation()
     arm(sim, 0.0)
     run(sim, 0.0, 0.5, torque=0.3)
+    assert sim.plant.brake_torques([not axis.armed for axis in sim.axes]) == (0.0, 0.0, 0.0)   # armed: released
     run(sim, 0.5, 0.11)                                 # silence
     assert all(axis.state == AxisState.IDLE and axis.errors == ODriveError.WATCHDOG_TIMER_EXPIRED for axis in sim.axes)
     assert sim.watchdog_trips == 3
     assert sim.applied_torques() == [0.0, 0.0, 0.0]
-    run(sim, 0.61, 3.0)
+    run(sim, 0.61, 0.5)                                 # the brakes stop it in well under a second
     assert all(abs(axis.vel_turns_s) < 1e-3 for axis in sim.axes)
 
 

@@ -1,0 +1,88 @@
+"""A corrupted encoder value never reaches the odometry (services/controller/encoder_check.py)."""
+import math
+import struct
+
+import pytest
+
+from sharedctl.services.controller.encoder_check import EncoderCheck
+from sharedctl.services.controller.odometry import AxisEstimate
+
+CHECK = EncoderCheck()
+PERIOD = 0.002
+
+
+def _stream(vel=5.0, n=50, t0=0.0, p0=10.0):
+    """A wheel turning at `vel` turns/s sampled every 2 ms: [(pos, vel, t)]."""
+    return [(p0 + vel * k * PERIOD, vel, t0 + k * PERIOD) for k in range(n)]
+
+
+def _run(frames):
+    prev, rejected, reasons = None, 0, []
+    for pos, vel, t in frames:
+        prev, reason = CHECK.judge(prev, pos, vel, t, rejected)
+        rejected = rejected + 1 if reason == "implausible_position" else 0
+        reasons.append(reason)
+    return prev, reasons
+
+
+def _flip(value: float, bit: int) -> float:
+    (raw,) = struct.unpack("<I", struct.pack("<f", value))
+    return struct.unpack("<f", struct.pack("<I", raw ^ (1 << bit)))[0]
+
+
+def test_a_consistent_stream_is_kept_as_it_is():
+    last, reasons = _run(_stream())
+    assert reasons == [None] * 50
+    assert last.pos_turns == pytest.approx(10.0 + 5.0 * 49 * PERIOD)
+
+
+@pytest.mark.parametrize("bit", range(12, 31))
+def test_one_flipped_position_bit_is_replaced_by_the_speed_integrated_increment(bit):
+    frames = _stream()
+    pos, vel, t = frames[25]
+    corrupted = _flip(pos, bit)
+    frames[25] = (corrupted, vel, t)
+    last, reasons = _run(frames)
+    error_turns = abs(corrupted - pos)
+    if error_turns > CHECK.pos_slack + CHECK.timing_slack * 5.0:
+        assert reasons[25] == "implausible_position"
+    assert reasons[26:] == [None] * 24
+    assert last.pos_turns == pytest.approx(10.0 + 5.0 * 49 * PERIOD, abs=1e-9)   # no lasting offset
+
+
+@pytest.mark.parametrize("bit", range(20, 31))
+def test_a_flipped_velocity_bit_is_held_at_the_previous_speed(bit):
+    frames = _stream()
+    pos, vel, t = frames[25]
+    frames[25] = (pos, _flip(vel, bit), t)
+    prev, _ = _run(frames[:25])
+    kept, reason = CHECK.judge(prev, *frames[25], 0)
+    if not math.isfinite(frames[25][1]) or abs(frames[25][1] - vel) > CHECK.max_accel * PERIOD + CHECK.vel_slack:
+        assert reason is not None and kept.vel_turns_s == vel
+    assert math.isfinite(kept.vel_turns_s) and math.isfinite(kept.pos_turns)
+
+
+def test_a_real_discontinuity_is_accepted_after_a_few_frames():
+    frames = _stream(n=20) + [(0.0 + 5.0 * k * PERIOD, 5.0, (20 + k) * PERIOD) for k in range(10)]   # drive restarted
+    last, reasons = _run(frames)
+    assert reasons[20:24] == ["implausible_position"] * 4
+    assert reasons[24] is None and last.pos_turns == pytest.approx(5.0 * 9 * PERIOD)
+
+
+def test_a_late_frame_within_the_timing_slack_is_kept():
+    frames = _stream(vel=8.0)
+    pos, vel, t = frames[30]
+    frames[30] = (pos, vel, t + 0.002)       # arrived 2 ms late: its value is from its send time
+    _, reasons = _run(frames)
+    assert reasons[30] is None
+
+
+def test_a_sudden_real_acceleration_at_the_torque_limit_is_kept():
+    frames, pos, vel = [], 10.0, 0.0
+    for k in range(40):
+        frames.append((pos, vel, k * PERIOD))
+        new_vel = vel + 500.0 * PERIOD          # ~ the wheels' reach at 60 N·m
+        pos += 0.5 * (vel + new_vel) * PERIOD
+        vel = new_vel
+    _, reasons = _run(frames)
+    assert reasons == [None] * 40
