@@ -1,6 +1,6 @@
 """The batched simulator (sharedctl.batched) reproduces simulator.simulate robot by robot.
 
-Stated tolerance (docs/performance-batched.md): for every robot, the same number of samples;
+Stated tolerance (docs/performance.md, "Batched simulator"): for every robot, the same number of samples;
 |Δq|, |Δq̇|, |Δq̇̂|, |Δθ̂| ≤ 1e-9 and |Δu| ≤ 1e-6 N at every sample; authority, group, law role
 and set class identical at every sample; the same authority and group switch counts; the
 summary (metrics.summarize) equal to the same tolerances. Durations are short (0.5–1 s at 2 ms).

@@ -10,7 +10,7 @@
    whose state turns non-finite, stops, with the rows simulator.simulate records for it.
 
 The arithmetic of each formula is the scalar simulator's, operation for operation, so the
-batch reproduces it to rounding (docs/performance-batched.md states the tolerance).
+batch reproduces it to rounding (docs/performance.md, "Batched simulator", states the tolerance).
 """
 from __future__ import annotations
 
