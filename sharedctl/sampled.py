@@ -13,6 +13,18 @@ from .shared_controller import OperatorInput, SharedController
 from .simulator import ClosedLoop, Trace, _Recorder
 
 
+def hold_and_integrate(model, q, v, u, h: float, substeps: int):
+    """The plant over one control period: `substeps` RK4 steps of length h with u held (zero-order hold)."""
+    for _ in range(substeps):
+        a1 = model.acceleration(q, v, u)
+        a2 = model.acceleration(q + h / 2 * v, v + h / 2 * a1, u)
+        a3 = model.acceleration(q + h / 2 * (v + h / 2 * a1), v + h / 2 * a2, u)
+        a4 = model.acceleration(q + h * (v + h / 2 * a2), v + h * a3, u)
+        q = q + h * v + h * h / 6 * (a1 + a2 + a3)
+        v = v + h / 6 * (a1 + 2 * a2 + 2 * a3 + a4)
+    return q, v
+
+
 def simulate_sampled(loop: ClosedLoop, q0, v0, duration: float, control_period: float, substeps: int = 4) -> Trace:
     """Plant RK4 at control_period/substeps with u_s held; controller stepped every control_period."""
     model, human = loop.model, loop.human
@@ -38,13 +50,7 @@ def simulate_sampled(loop: ClosedLoop, q0, v0, duration: float, control_period: 
             inside=loop.feasible.contains(q),
         )
         u = out.u_s
-        for _ in range(substeps):
-            a1 = model.acceleration(q, v, u)
-            a2 = model.acceleration(q + h / 2 * v, v + h / 2 * a1, u)
-            a3 = model.acceleration(q + h / 2 * (v + h / 2 * a1), v + h / 2 * a2, u)
-            a4 = model.acceleration(q + h * (v + h / 2 * a2), v + h * a3, u)
-            q = q + h * v + h * h / 6 * (a1 + a2 + a3)
-            v = v + h / 6 * (a1 + 2 * a2 + 2 * a3 + a4)
+        q, v = hold_and_integrate(model, q, v, u, h, substeps)
         if not (np.all(np.isfinite(q)) and np.all(np.isfinite(v))):
             finite = False
             k += 1

@@ -26,6 +26,7 @@ import time
 from pathlib import Path
 
 from . import control_step, stack_run
+from .markdown import lookup
 
 TARGETS = {
     "control_step_us.ce.median": ("≤", 50.0),
@@ -141,15 +142,6 @@ def ratios(report: dict) -> dict:
         "ce_step_over_period_500hz": (lookup(report, "control_step_us.ce.median") or math.nan) / 2000.0,
         "loop_1khz_rate_over_target": (lookup(report, "loop_1khz.rate_hz") or math.nan) / 1000.0,
     }
-
-
-def lookup(report: dict, dotted: str):
-    node = report
-    for part in dotted.split("."):
-        if not isinstance(node, dict) or part not in node:
-            return None
-        node = node[part]
-    return node
 
 
 def check_targets(report: dict) -> dict:

@@ -14,7 +14,8 @@ def _fmt(value, digits: int = 3) -> str:
     return str(value)
 
 
-def _get(report: dict, dotted: str):
+def lookup(report: dict, dotted: str):
+    """report["a"]["b"]… for "a.b…", or None where a part is missing."""
     node = report
     for part in dotted.split("."):
         if not isinstance(node, dict) or part not in node:
@@ -42,7 +43,7 @@ def render(report: dict) -> str:
             "| law | median | p99 | thread-CPU median | all steps median | operator-only median |", "|---|---:|---:|---:|---:|---:|"]
     for law, s in (report.get("control_step_us") or {}).items():
         out.append(f"| {law} | {_fmt(s.get('median'))} | {_fmt(s.get('p99'))} | {_fmt(s.get('thread_cpu_median'))} | "
-                   f"{_fmt(_get(s, 'all.median'))} | {_fmt(_get(s, 'operator_only.median'))} |")
+                   f"{_fmt(lookup(s, 'all.median'))} | {_fmt(lookup(s, 'operator_only.median'))} |")
     detail = report.get("control_step_detail") or {}
     if detail.get("breakdown_us"):
         out += ["", "Parts of one engaged CE step (µs, median of repeated calls):", "", "| part | µs |", "|---|---:|"]
@@ -60,24 +61,24 @@ def render(report: dict) -> str:
     out += ["", "## Loop, latency, bus, CPU", "", "| figure | 500 Hz | 1 kHz | 500 Hz, --sensor-sync |", "|---|---:|---:|---:|"]
     runs = ("loop", "loop_1khz", "loop_sensor_sync")
     for key in ("rate_hz", "deadline_misses", "jitter_p50_us", "jitter_p99_us", "periods_without_torque_on_bus"):
-        out.append(f"| loop {key} | " + " | ".join(_fmt(_get(report, f"{r}.{key}")) for r in runs) + " |")
+        out.append(f"| loop {key} | " + " | ".join(_fmt(lookup(report, f"{r}.{key}")) for r in runs) + " |")
     for key in ("missed", "late", "estops", "lateness_p99_us", "compute_p50_us", "compute_p99_us"):
-        out.append(f"| daemon {key} | " + " | ".join(_fmt(_get(report, f"{r}.daemon.{key}")) for r in runs) + " |")
+        out.append(f"| daemon {key} | " + " | ".join(_fmt(lookup(report, f"{r}.daemon.{key}")) for r in runs) + " |")
     sensor = ("latency.sensor_to_torque_us", "loop_1khz.sensor_to_torque_us", "loop_sensor_sync.sensor_to_torque_us")
     out.append("| sensor → torque p50 / p99 µs | " + " | ".join(
-        f"{_fmt(_get(report, s + '.p50'))} / {_fmt(_get(report, s + '.p99'))}" for s in sensor) + " |")
-    out.append(f"| operator → torque p50 / p99 µs | {_fmt(_get(report, 'latency.operator_to_torque_us.p50'))} / "
-               f"{_fmt(_get(report, 'latency.operator_to_torque_us.p99'))} | | "
-               f"{_fmt(_get(report, 'loop_sensor_sync.operator_to_torque_us.p50'))} / "
-               f"{_fmt(_get(report, 'loop_sensor_sync.operator_to_torque_us.p99'))} |")
+        f"{_fmt(lookup(report, s + '.p50'))} / {_fmt(lookup(report, s + '.p99'))}" for s in sensor) + " |")
+    out.append(f"| operator → torque p50 / p99 µs | {_fmt(lookup(report, 'latency.operator_to_torque_us.p50'))} / "
+               f"{_fmt(lookup(report, 'latency.operator_to_torque_us.p99'))} | | "
+               f"{_fmt(lookup(report, 'loop_sensor_sync.operator_to_torque_us.p50'))} / "
+               f"{_fmt(lookup(report, 'loop_sensor_sync.operator_to_torque_us.p99'))} |")
     for key in ("zenoh_floor_us", "can_floor_us"):
-        out.append(f"| {key.removesuffix('_us').replace('_', ' ')} p50 / p99 µs | {_fmt(_get(report, f'latency.{key}.p50'))} / "
-                   f"{_fmt(_get(report, f'latency.{key}.p99'))} | | |")
-    out.append(f"| bus load (1 Mbit/s, worst-case stuffing) | {_fmt(_get(report, 'bus_load.fraction_1mbit'))} | "
-               f"{_fmt(_get(report, 'loop_1khz.bus_load.fraction_1mbit'))} | |")
-    out.append(f"| CPU, robot + controller (fraction of one core) | {_fmt(_get(report, 'cpu.fraction_of_one_core'))} | "
-               f"{_fmt(_get(report, 'loop_1khz.cpu.fraction_of_one_core'))} | |")
-    per = _get(report, "cpu.per_process") or {}
+        out.append(f"| {key.removesuffix('_us').replace('_', ' ')} p50 / p99 µs | {_fmt(lookup(report, f'latency.{key}.p50'))} / "
+                   f"{_fmt(lookup(report, f'latency.{key}.p99'))} | | |")
+    out.append(f"| bus load (1 Mbit/s, worst-case stuffing) | {_fmt(lookup(report, 'bus_load.fraction_1mbit'))} | "
+               f"{_fmt(lookup(report, 'loop_1khz.bus_load.fraction_1mbit'))} | |")
+    out.append(f"| CPU, robot + controller (fraction of one core) | {_fmt(lookup(report, 'cpu.fraction_of_one_core'))} | "
+               f"{_fmt(lookup(report, 'loop_1khz.cpu.fraction_of_one_core'))} | |")
+    per = lookup(report, "cpu.per_process") or {}
     if per:
         out.append(f"| CPU per process at 500 Hz | {', '.join(f'{k} {_fmt(v)}' for k, v in per.items())} | | |")
     b = report.get("batched_sim") or {}

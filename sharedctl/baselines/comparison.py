@@ -14,6 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..sampled import hold_and_integrate
 from ..shared_controller import NonFiniteCommand
 from ..simulator import ClosedLoop
 from .cbf import CbfSafetyFilter
@@ -91,13 +92,7 @@ def run(strategy: Strategy, loop: ClosedLoop, q0, v0, duration: float, condition
         cols["wish"][k] = human.desired(t).q
         flags["operator_in_control"][k], flags["hands_off"][k] = cmd.operator_in_control, hands_off
         margin[k], flags["inside"][k] = feasible.margin(q), feasible.contains(q)
-        for _ in range(substeps):
-            a1 = model.acceleration(q, v, u)
-            a2 = model.acceleration(q + h / 2 * v, v + h / 2 * a1, u)
-            a3 = model.acceleration(q + h / 2 * (v + h / 2 * a1), v + h / 2 * a2, u)
-            a4 = model.acceleration(q + h * (v + h / 2 * a2), v + h * a3, u)
-            q = q + h * v + h * h / 6 * (a1 + a2 + a3)
-            v = v + h / 6 * (a1 + 2 * a2 + 2 * a3 + a4)
+        q, v = hold_and_integrate(model, q, v, u, h, substeps)
         if not (np.all(np.isfinite(q)) and np.all(np.isfinite(v))):
             finite = False
             k += 1
