@@ -126,15 +126,19 @@ class CoastOutcome:
         return self.min_margin <= 0.0
 
 
+def _start(scenario, controller):
+    """The scenario's closed loop, its shared controller and initial state, the true plant and its state."""
+    loop, q0, v0 = scenario.closed_loop(controller)
+    ctrl = SharedController(loop.model, loop.feasible, loop.controller, loop.sharing, loop.reference)
+    plant = Plant(loop.model, RobotSimConfig.from_table(scenario.data.get("robot_sim")))
+    return loop, ctrl, ctrl.initial_state(q0, loop.theta_hat0), plant, plant.initial_state(q0, v0)
+
+
 def sampled_loop(scenario, duration: float, controller: str | None = None, period: float = CONTROL_PERIOD):
     """The scenario's sampled shared loop on the true plant (as `sharedctl robot` integrates it):
     a list of `LoopSample`s, one per control period, and the plant."""
-    loop, q0, v0 = scenario.closed_loop(controller)
+    loop, ctrl, state, plant, ps = _start(scenario, controller)
     model, human = loop.model, loop.human
-    ctrl = SharedController(model, loop.feasible, loop.controller, loop.sharing, loop.reference)
-    state = ctrl.initial_state(q0, loop.theta_hat0)
-    plant = Plant(model, RobotSimConfig.from_table(scenario.data.get("robot_sim")))
-    ps = plant.initial_state(q0, v0)
     samples = []
     for k in range(int(round(duration / period))):
         t = k * period
@@ -195,12 +199,8 @@ def delayed_loop_margin(scenario, duration: float, loop_delay: float, controller
     controller computes from the state `loop_delay` old, as a CAN delay of loop_delay/2 each way does.
     `hang` = (START, DURATION): the controller does not run in that window (SIGSTOP shorter than the
     drives' watchdog) and the drives hold its last torque; it then resumes on fresh feedback."""
-    loop, q0, v0 = scenario.closed_loop(controller)
+    loop, ctrl, state, plant, ps = _start(scenario, controller)
     model, human = loop.model, loop.human
-    ctrl = SharedController(model, loop.feasible, loop.controller, loop.sharing, loop.reference)
-    state = ctrl.initial_state(q0, loop.theta_hat0)
-    plant = Plant(model, RobotSimConfig.from_table(scenario.data.get("robot_sim")))
-    ps = plant.initial_state(q0, v0)
     lag = int(round(loop_delay / period))
     history = [(ps.q.copy(), ps.qd.copy())] * (lag + 1)
     min_margin, peak = loop.feasible.margin(ps.q), 0.0
