@@ -10,13 +10,24 @@ robot does not have.
 
 Pure: estimates and their arrival times in, the estimate to use and the reason for any
 substitution out. The two values of one `Get_Encoder_Estimates` frame check each other and the
-previous frame of the same wheel:
+previous frame of the same wheel. The drives sample on a `period` tick (1 ms) and send every other tick; how many ticks lie
+between two received frames is not known (frames get lost, a delayed link releases several at
+once, arrival times say little about sampling times), so the check asks whether *some* whole
+number of periods k = 1 … `max_periods` explains the frame:
 
-* velocity: |v − v_prev| ≤ `max_accel`·Δt + `vel_slack` (the drive cannot accelerate the wheel
-  faster than its torque limit allows); otherwise the velocity is held at v_prev;
-* position: |Δp − ½(v_prev + v)·Δt| ≤ `pos_slack` + `timing_slack`·|v| (the increment agrees with
-  the measured speed over the time between arrivals, with room for arrival-time jitter);
-  otherwise the position is replaced by p_prev + ½(v_prev + v)·Δt.
+* position: |Δp − ½(v_prev + v)·k·period| ≤ `pos_slack` + `speed_slack`·|v| + ½|v − v_prev|·k·period
+  for some k (the increment agrees with the measured speeds over whole sampling ticks; the last
+  term bounds the trapezoid's error for a speed that changes monotonically); otherwise the position
+  is replaced by p_prev + ½(v_prev + v)·k·period with k from the arrival time, clipped to 1 …
+  `max_periods`.
+* velocity (first): |v − v_prev| ≤ `max_accel`·k·period + `vel_slack`, k from the arrival time
+  (at least 2) — the drive cannot accelerate the wheel faster than its torque limit allows;
+  otherwise it is held at v_prev.
+
+At rest and at the low speeds near a face every candidate increment is close to 0, so a wrong
+position of more than a few hundredths of a turn is caught where the margin is thin; at speed,
+an error that lands on another whole number of periods can pass (the odometry integrates
+increments, so the next good frame undoes it).
 
 A substituted value is counted by the caller. `rebaseline_after` consecutive position rejections
 accept the new position as it is: a drive that restarted from 0 turns is a real discontinuity
@@ -32,10 +43,12 @@ from .odometry import AxisEstimate
 
 @dataclass(frozen=True)
 class EncoderCheck:
+    period: float = 0.001           # s: the drive samples on a 1 kHz tick (frames every 2 ticks, ± a tick)
+    max_periods: int = 50           # ticks apart the check considers (50 ms: the feedback timeout)
     max_accel: float = 600.0        # turns/s²: above the wheels' reach at the 60 N·m torque limit (~500)
     vel_slack: float = 0.5          # turns/s
     pos_slack: float = 0.002        # turns (0.5 mm of wheel travel)
-    timing_slack: float = 0.02      # s of arrival-time jitter allowed in the position check (delays, bursts)
+    speed_slack: float = 0.0005     # s: tolerance proportional to speed (rounding of the sampling instants)
     rebaseline_after: int = 5       # consecutive position rejections that make a new baseline
 
     def judge(self, prev: AxisEstimate | None, pos: float, vel: float, now: float,
@@ -48,12 +61,22 @@ class EncoderCheck:
             return AxisEstimate(held.pos_turns, held.vel_turns_s, now), "implausible_position"
         if prev is None:
             return AxisEstimate(pos, vel, now), None
-        dt = max(now - prev.received, 0.0)
+        v_prev, p_prev = prev.vel_turns_s, prev.pos_turns
+        arrived = min(max(round((now - prev.received) / self.period), 1), self.max_periods)
         reason = None
-        if abs(vel - prev.vel_turns_s) > self.max_accel * dt + self.vel_slack:
-            vel, reason = prev.vel_turns_s, "implausible_velocity"
-        expected = prev.pos_turns + 0.5 * (prev.vel_turns_s + vel) * dt
-        tolerance = self.pos_slack + self.timing_slack * max(abs(vel), abs(prev.vel_turns_s))
-        if abs(pos - expected) > tolerance and rejected_in_a_row + 1 < self.rebaseline_after:
-            pos, reason = expected, "implausible_position"
+        if abs(vel - v_prev) > self.max_accel * max(arrived, 2) * self.period + self.vel_slack:
+            vel, reason = v_prev, "implausible_velocity"
+        tolerance = self.pos_slack + self.speed_slack * max(abs(vel), abs(v_prev))
+        k = self._periods(pos - p_prev, v_prev, vel, tolerance)
+        if k is None and rejected_in_a_row + 1 < self.rebaseline_after:
+            pos, reason = p_prev + 0.5 * (v_prev + vel) * arrived * self.period, "implausible_position"
         return AxisEstimate(pos, vel, now), reason
+
+    def _periods(self, increment: float, v_prev: float, vel: float, tolerance: float) -> int | None:
+        """The k in 1 … max_periods whose trapezoid ½(v_prev + v)·k·period is nearest `increment`, if
+        within `tolerance` + ½|v − v_prev|·k·period (for a speed that changes monotonically between
+        the samples the travel lies between v_prev·τ and v·τ: the trapezoid is off by at most that)."""
+        step = 0.5 * (v_prev + vel) * self.period
+        k = 1 if abs(step) < 1e-12 else min(max(round(increment / step), 1), self.max_periods)
+        bound = tolerance + 0.5 * abs(vel - v_prev) * k * self.period
+        return k if abs(increment - k * step) <= bound else None
