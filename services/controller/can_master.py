@@ -188,8 +188,7 @@ class CanMaster:
                                                              now, axis.positions_rejected_in_a_row)
             if reason is not None:
                 self.implausible_estimates[reason] += 1
-            axis.positions_rejected_in_a_row = (axis.positions_rejected_in_a_row + 1
-                                                if reason == "implausible_position" else 0)
+            axis.positions_rejected_in_a_row = axis.positions_rejected_in_a_row + 1 if reason else 0
         elif isinstance(frame, cs.Heartbeat):
             self._heartbeat(axis, frame, now)
 
