@@ -32,10 +32,19 @@ class RateClock:
     """Absolute-deadline periodic clock (no drift): `wait()` sleeps until the next tick.
 
     Returns the lateness of the tick in seconds; counts ticks that were missed entirely.
+
+    `spin` (s, default 0): sleep only until `spin` before the deadline and poll the clock for the
+    rest. A sleeping thread wakes some tens of microseconds after its timer (more on a virtual
+    machine); polling the last stretch starts the tick on time, at the cost of at most `spin` of
+    CPU per tick (the sleep never returns early). Meant for a real-time loop thread with a short
+    period (the controller: 100 µs at 500 Hz, ≤ 5 % of a core); 0 keeps the plain sleep.
     """
 
-    def __init__(self, period: float) -> None:
+    def __init__(self, period: float, spin: float = 0.0) -> None:
+        if spin < 0.0:
+            raise ValueError(f"spin must be ≥ 0, got {spin}")
         self.period = period
+        self.spin = min(spin, period)
         self.start = time.monotonic()
         self.next = self.start + period
         self.missed = 0
@@ -46,9 +55,13 @@ class RateClock:
             skipped = int((now - self.next) / self.period)
             self.missed += skipped
             self.next += skipped * self.period
-        delay = self.next - now
+        delay = self.next - now - self.spin
         if delay > 0:
             time.sleep(delay)
+        if self.spin > 0.0:
+            deadline = self.next
+            while time.monotonic() < deadline:
+                pass
         lateness = max(0.0, time.monotonic() - self.next)
         self.next += self.period
         return lateness

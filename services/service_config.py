@@ -58,7 +58,8 @@ def options_from_file(path: Path, known: dict[str, argparse.Action]) -> list[str
         if action.nargs == 0:                           # a flag
             if not isinstance(value, bool):
                 raise ServiceConfigError(f"{path}: {key}: expected true or false")
-            argv += [option] if value else []
+            negative = f"--no-{key}"                    # argparse.BooleanOptionalAction: false → --no-KEY
+            argv += [option] if value else ([negative] if negative in action.option_strings else [])
         elif isinstance(value, list):
             for item in value:
                 argv += [option, _scalar(item, path, key)]

@@ -14,8 +14,12 @@ from __future__ import annotations
 
 import itertools
 from dataclasses import dataclass, field
+from functools import cached_property
+from typing import NamedTuple
 
 import numpy as np
+
+from .short_vectors import matvec, rows_of
 
 
 class ConstraintError(ValueError):
@@ -72,13 +76,28 @@ class ConstraintGroup:
         """x^i = K_i q + T_i."""
         return self.K @ q + self.T
 
+    @cached_property
+    def floats(self) -> "GroupFloats":
+        """K_i, T_i, K_i⁻¹ and K_iᵀ as tuples of Python floats (for the per-sample arithmetic)."""
+        return GroupFloats(rows_of(self.K), tuple(self.T.tolist()), rows_of(self.K_inv), rows_of(self.K.T))
+
+
+class GroupFloats(NamedTuple):
+    """One group's matrices as row tuples of Python floats (short_vectors)."""
+
+    K: tuple
+    T: tuple
+    K_inv: tuple
+    K_transposed: tuple
+
 
 @dataclass(frozen=True)
 class GroupStack:
     """All groups' matrices stacked, for evaluating every group at once.
 
     `K_rows` (G·n × n) and `T_rows` (G·n) are the same rows flattened: one matrix product gives
-    every group's x = K q + T (transform.all_groups).
+    every group's x = K q + T (transform.all_groups). `K_inv_blocks` (G·n × G·n) holds every K⁻¹
+    on its diagonal: one product maps every group's vector back at once.
     """
 
     K: np.ndarray       # G×n×n
@@ -86,10 +105,16 @@ class GroupStack:
     K_inv: np.ndarray   # G×n×n
     K_rows: np.ndarray = field(init=False, repr=False, compare=False)
     T_rows: np.ndarray = field(init=False, repr=False, compare=False)
+    K_inv_blocks: np.ndarray = field(init=False, repr=False, compare=False)
 
     def __post_init__(self):
+        G, n = self.T.shape
+        blocks = np.zeros((G * n, G * n))
+        for g in range(G):
+            blocks[g * n:(g + 1) * n, g * n:(g + 1) * n] = self.K_inv[g]
         object.__setattr__(self, "K_rows", np.ascontiguousarray(self.K.reshape(-1, self.K.shape[-1])))
         object.__setattr__(self, "T_rows", np.ascontiguousarray(self.T.reshape(-1)))
+        object.__setattr__(self, "K_inv_blocks", blocks)
 
     @staticmethod
     def of(groups) -> "GroupStack":
@@ -154,11 +179,18 @@ class FeasibleSet:
             object.__setattr__(self, "_row_sets_cache", cached)
         return cached
 
-    def row_values(self, q: np.ndarray, v: np.ndarray) -> tuple[list, list]:
-        """K q + T and K v for the rows of every region, stacked (spans in `row_spans`), as floats."""
+    def row_values(self, q, v) -> tuple[list, list]:
+        """K q + T and K v for the rows of every region, stacked (spans in `row_spans`), as floats.
+        `q`, `v`: arrays or lists of floats."""
         rows = self._rows
-        both = rows.K @ np.array([q, v]).T
-        return (both[:, 0] + rows.T).tolist(), both[:, 1].tolist()
+        K = rows.K_floats
+        return [kq + t for kq, t in zip(matvec(K, _as_list(q)), rows.T_floats)], matvec(K, _as_list(v))
+
+    def group_rows(self, g: int, rows: tuple[list, list]) -> tuple[list, list]:
+        """Group g's x = K_g q + T_g and ẋ = K_g v, picked from `rows` = row_values(q, v)."""
+        values, rates = rows
+        picks = self._rows.group_rows[g]
+        return [values[i] for i in picks], [rates[i] for i in picks]
 
     @property
     def row_spans(self) -> tuple[tuple[int, int], ...]:
@@ -170,6 +202,11 @@ class FeasibleSet:
         rows = self._rows
         outside = ~(points @ rows.K.T + rows.T <= 0.0) & rows.own     # NaN counts as outside
         return ~outside.any(axis=1)
+
+    def point_inside_group_region(self, g: int, point) -> bool:
+        """reference_inside for one group: is `point` (floats) inside group g's polytope (NaN: outside)?"""
+        K, T = self._rows.by_region[self.groups[g].region]
+        return all(kp + t <= 0.0 for kp, t in zip(matvec(K, point), T))
 
     @property
     def _rows(self) -> "_StackedRows":
@@ -203,6 +240,15 @@ class _StackedRows:
     T: np.ndarray
     spans: tuple[tuple[int, int], ...]
     own: np.ndarray
+    group_rows: tuple[tuple[int, ...], ...]     # group g's rows, as indices into the stacked rows
+    K_floats: tuple = field(init=False, repr=False, compare=False)
+    T_floats: tuple = field(init=False, repr=False, compare=False)
+    by_region: tuple = field(init=False, repr=False, compare=False)    # (K rows, T) of each region, as floats
+
+    def __post_init__(self):
+        object.__setattr__(self, "K_floats", rows_of(self.K))
+        object.__setattr__(self, "T_floats", tuple(self.T.tolist()))
+        object.__setattr__(self, "by_region", tuple((self.K_floats[a:b], self.T_floats[a:b]) for a, b in self.spans))
 
     @staticmethod
     def of(feasible: FeasibleSet) -> "_StackedRows":
@@ -213,8 +259,13 @@ class _StackedRows:
         for g, grp in enumerate(feasible.groups):
             a, b = spans[grp.region]
             own[g, a:b] = True
+        group_rows = tuple(tuple(spans[grp.region][0] + j for j in grp.rows) for grp in feasible.groups)
         return _StackedRows(np.vstack([r.K for r in feasible.regions]), np.concatenate([r.T for r in feasible.regions]),
-                            spans, own)
+                            spans, own, group_rows)
+
+
+def _as_list(vector) -> list:
+    return vector.tolist() if isinstance(vector, np.ndarray) else vector
 
 
 def _max_or_nan(values: list) -> float:

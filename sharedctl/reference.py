@@ -14,6 +14,7 @@ with s = 1/(1 + exp(γ (m + ε))), so ẋ_r = σ' ṁ and ẍ_r = σ'' ṁ² + �
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -38,6 +39,31 @@ def saturate(m: np.ndarray, shape: ReferenceShape) -> tuple[np.ndarray, np.ndarr
     x_r = -eps - np.logaddexp(0.0, u) / g      # ln(1 + e^u), overflow-free
     s = 0.5 + 0.5 * np.tanh(0.5 * u)           # = 1/(1+e^{-u}) = 1/(1+exp(γ(m+ε)))
     return x_r, s, -g * s * (1.0 - s)
+
+
+def saturate_floats(m: list, shape: ReferenceShape) -> tuple[list, list, list]:
+    """`saturate` on a short list of Python floats: the same formulas term by term, np.logaddexp's
+    branches written out (ln(1 + e^u) = u + ln(1 + e^−u) for u > 0, ln(1 + e^u) for u < 0).
+    tanh is numpy's own: far inside a face 1 − s keeps only a few digits, so σ'' = −γ s (1 − s)
+    depends on tanh's last bit, and it must be the bit the vectorised `saturate` gets."""
+    eps, g = shape.epsilon, shape.gamma
+    u = [-g * (mj + eps) for mj in m]
+    x_r, s, d2 = [], [], []
+    for uj, tj in zip(u, np.tanh([0.5 * uj for uj in u]).tolist()):
+        if uj > 0.0:
+            softplus = uj + math.log1p(math.exp(-uj))
+        elif uj < 0.0:
+            softplus = math.log1p(math.exp(uj))
+        else:
+            softplus = _LN2 if uj == 0.0 else uj        # uj NaN: NaN
+        sj = 0.5 + 0.5 * tj
+        x_r.append(-eps - softplus / g)
+        s.append(sj)
+        d2.append(-g * sj * (1.0 - sj))
+    return x_r, s, d2
+
+
+_LN2 = math.log(2.0)
 
 
 def projected_reference(

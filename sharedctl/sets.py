@@ -29,6 +29,7 @@ from __future__ import annotations
 import enum
 import math
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
@@ -88,9 +89,8 @@ def classify_rows(x: np.ndarray, x_dot: np.ndarray, bands: Bands) -> SetClass:
     return SetClass.SAFE
 
 
-@dataclass(frozen=True)
-class Situation:
-    """The classification of one state (q, v) against a feasible set."""
+class Situation(NamedTuple):
+    """The classification of one state (q, v) against a feasible set (a named tuple: one is built every sample)."""
 
     overall: SetClass
     containing: tuple[int, ...]             # regions that contain q

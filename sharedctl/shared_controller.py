@@ -11,7 +11,6 @@ immutable, so the daemon, a test and a replay all run the same code.
 """
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -21,8 +20,9 @@ from .models import EulerLagrangeModel
 from .reference import ReferenceShape
 from .sets import SetClass
 from .sharing import ArbiterState, Authority, LawRole, Mode, SharingParameters, arbitrate, select_group, shared_input
+from .short_vectors import all_finite, floats
 from .simulator import MachineController
-from .transform import Desired, GroupsAtOnce
+from .transform import Desired, all_groups, coordinates
 
 
 @dataclass(frozen=True)
@@ -81,31 +81,33 @@ class SharedController:
         """One sample: returns (next state, output). `v` may be None for output feedback.
 
         The hot path of the daemon (docs/performance.md): per-step constants are cached where
-        they are built (stacked rows, gain vectors, parameter box), and small arrays are checked
-        with Python loops rather than array reductions; the arithmetic is that of the functions
-        it calls (tests/test_shared_step_reference.py holds it to recorded outputs).
+        they are built (stacked rows, gain vectors, parameter box); the per-sample arithmetic —
+        the rows of Definition 2, the active group's (6)–(11), the laws — runs on Python floats
+        (short_vectors), with numpy arrays only at the interface; every group's evaluation for
+        (46)'s selection is made only when a group is to be selected (_EveryGroupOnDemand).
+        tests/test_shared_step_reference.py holds it to recorded outputs.
         """
         model, feasible, machine = self.model, self.feasible, self.machine
         observer = machine.observer
         v_used = observer.velocity(q, state.observer) if observer else np.asarray(v, float)
         mode = self.sharing.mode
         intent = 0.0 if mode is Mode.MACHINE else operator.intent
-        groups = GroupsAtOnce.evaluate(feasible.stack, q, v_used, operator.desired, self.reference, machine.tracking.lam)
-        q_r_all, values = groups.q_r, groups.value
-        ref_ok = feasible.reference_inside(q_r_all)
-        lyapunov = values.tolist().__getitem__
-        rows = feasible.row_values(q, v_used)
-        arbiter, decision = arbitrate(feasible, self.sharing, state.arbiter, q, v_used, intent, dt, lyapunov, ref_ok, rows)
+        q_list, v_list = floats(q), v_used.tolist()
+        rows = feasible.row_values(q_list, v_list)
+        every_group = _EveryGroupOnDemand(feasible, q, v_used, operator.desired, self.reference, machine.tracking.lam)
+        arbiter, decision = arbitrate(feasible, self.sharing, state.arbiter, q, v_used, intent, dt,
+                                      every_group.lyapunov, every_group, rows)
 
         theta_hat, law_role, law_state = state.theta_hat, state.law_role, state.law_state
         engaged = decision.authority is not Authority.HUMAN and decision.group is not None
+        if engaged:
+            grp = feasible.groups[decision.group]
+            c = coordinates(grp, q_list, v_list, operator.desired, self.reference, feasible.group_rows(decision.group, rows))
         previous_law = machine.law(law_role) if law_role is not None else None
         if engaged and (law_role is None or decision.group_changed or decision.role_changed or law_role is not decision.role):
             if previous_law is not None:
                 theta_hat = previous_law.estimate(theta_hat, law_state)
             law_role = decision.role
-            grp = feasible.groups[decision.group]
-            c = groups.coordinates(decision.group, grp)
             law_state = machine.law(law_role).initial_state(model, grp, c, q, v_used, theta_hat)
         elif not engaged and previous_law is not None:
             theta_hat = previous_law.estimate(theta_hat, law_state)
@@ -115,8 +117,6 @@ class SharedController:
         u_f = self._zero_force()
         theta_next, law_next = theta_hat, law_state
         if engaged:
-            grp = feasible.groups[decision.group]
-            c = groups.coordinates(decision.group, grp)
             if c.inside:
                 law = machine.law(law_role)
                 out = law.evaluate(model, grp, c, q, v_used, theta_hat, law_state)
@@ -131,8 +131,11 @@ class SharedController:
         u_s = shared_input(decision, u_h, u_f)
 
         observer_next = state.observer + dt * observer.derivative(q, state.observer) if observer else state.observer
-        ref_group = decision.group if engaged else select_group(feasible, decision.situation, lyapunov, ref_ok)
-        q_r = q_r_all[ref_group] if ref_group is not None else np.full(model.n, np.nan)
+        if engaged:
+            q_r = np.array(c.floats.q_r)       # the active group's projected reference
+        else:
+            ref_group = select_group(feasible, decision.situation, every_group.lyapunov, every_group)
+            q_r = every_group.q_r[ref_group] if ref_group is not None else np.full(model.n, np.nan)
         estimate = machine.law(law_role).estimate(theta_next, law_next) if law_role is not None else theta_next
         output = StepOutput(
             u_s=u_s, u_h=u_h, u_f=u_f, authority=decision.authority, set_class=decision.situation.overall,
@@ -140,7 +143,7 @@ class SharedController:
             theta_estimate=estimate, v_used=v_used, region_margins=feasible.region_margins(q, rows[0]),
         )
         next_state = ControllerState(arbiter, theta_next, law_role, law_next, observer_next)   # every field
-        if not (_finite(u_s) and _finite(theta_next) and _finite(law_next)):
+        if not (all_finite(u_s.tolist()) and all_finite(theta_next.tolist()) and all_finite(law_next.tolist())):
             raise NonFiniteCommand("the shared controller produced a non-finite value")
         return next_state, output
 
@@ -161,9 +164,29 @@ _EMPTY = np.zeros(0)
 _EMPTY.flags.writeable = False
 
 
-def _finite(values: np.ndarray) -> bool:
-    """np.all(np.isfinite(values)) for short vectors, without an array reduction."""
-    return all(map(math.isfinite, values.tolist()))
+class _EveryGroupOnDemand:
+    """Every group's projected reference and selection value (transform.all_groups) and whether
+    each reference lies inside its polytope (FeasibleSet.point_inside_group_region), evaluated the
+    first time select_group asks: a sample in which the machine keeps its group never does.
+    `lyapunov(g)` and `self[g]` are what select_group takes as `lyapunov` and `reference`."""
+
+    def __init__(self, feasible: FeasibleSet, q, v, desired: Desired, shape: ReferenceShape, lam: float):
+        self._feasible, self._args = feasible, (feasible.stack, q, v, desired, shape, lam)
+        self._values = None
+
+    def _evaluate(self):
+        self.q_r, values = all_groups(*self._args)
+        self._values, self._q_r_floats = values.tolist(), self.q_r.tolist()
+
+    def lyapunov(self, g: int) -> float:
+        if self._values is None:
+            self._evaluate()
+        return self._values[g]
+
+    def __getitem__(self, g: int) -> bool:
+        if self._values is None:
+            self._evaluate()
+        return self._feasible.point_inside_group_region(g, self._q_r_floats[g])
 
 
 class NonFiniteCommand(ArithmeticError):

@@ -36,6 +36,7 @@ from __future__ import annotations
 import enum
 import math
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
@@ -85,9 +86,8 @@ class ArbiterState:
     group_switches: int = 0
 
 
-@dataclass(frozen=True)
-class Decision:
-    """What to apply until the next sample."""
+class Decision(NamedTuple):
+    """What to apply until the next sample (a named tuple: one is built every sample)."""
 
     authority: Authority
     group: int | None
@@ -108,12 +108,13 @@ def covering(feasible: FeasibleSet, situation: Situation, group: int) -> bool:
     return set(rows) <= set(grp.rows)
 
 
-def _clear_of_faces(feasible: FeasibleSet, group: int | None, q: np.ndarray, bands: Bands) -> bool:
-    """Every row of the group at least b1 inside its face (x_j ≤ −b1)."""
+def _clear_of_faces(feasible: FeasibleSet, group: int | None, q: np.ndarray, bands: Bands, rows=None) -> bool:
+    """Every row of the group at least b1 inside its face (x_j ≤ −b1). `rows`: row_values(q, ·), if known."""
     if group is None:
         return True
     b1 = bands.b1
-    return all(xj <= -b1 for xj in feasible.groups[group].values(q).tolist())
+    x = feasible.groups[group].values(q).tolist() if rows is None else feasible.group_rows(group, rows)[0]
+    return all(xj <= -b1 for xj in x)
 
 
 def select_group(feasible: FeasibleSet, situation: Situation, lyapunov, reference=None) -> int | None:
@@ -184,7 +185,7 @@ def arbitrate(
     role = state.role
     if overall is SetClass.HAZARD:
         role = LawRole.HAZARD
-    elif role is LawRole.HAZARD and overall is SetClass.SAFE and _clear_of_faces(feasible, state.group, q, params.bands):
+    elif role is LawRole.HAZARD and overall is SetClass.SAFE and _clear_of_faces(feasible, state.group, q, params.bands, rows):
         role = LawRole.TRACKING
     # otherwise hold the role: the hazard law keeps running until the state is safe *and*
     # outside the inner band of its group (a law-level Schmitt trigger). The tracking law

@@ -19,12 +19,15 @@ operator's desired trajectory; docs/control.md §2 derives it.
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
 from .constraints import ConstraintGroup, GroupStack
-from .reference import ReferenceShape, saturate
+from .reference import ReferenceShape, saturate, saturate_floats
+from .short_vectors import floats, matvec
 
 
 @dataclass(frozen=True)
@@ -36,43 +39,83 @@ class Desired:
     q_ddot: np.ndarray
 
 
-@dataclass(frozen=True)
-class GroupCoordinates:
-    """Everything the machine laws need about one group at one instant."""
+class CoordinateFloats(NamedTuple):
+    """One group's coordinates at one instant as lists of Python floats (see GroupCoordinates)."""
 
-    x: np.ndarray          # K q + T  (< 0 inside)
-    x_dot: np.ndarray      # K v
-    x_r: np.ndarray        # projected reference (< 0)
-    x_r_dot: np.ndarray
-    x_r_ddot: np.ndarray
-    z: np.ndarray          # ln(x / x_r)
-    q_r: np.ndarray        # K⁻¹ (x_r − T): the projected reference configuration
-    v_r: np.ndarray        # K⁻¹ ẋ_r
+    x: list          # K q + T  (< 0 inside)
+    x_dot: list      # K v
+    x_r: list        # projected reference (< 0)
+    x_r_dot: list
+    x_r_ddot: list
+    z: list          # ln(x / x_r)
+    q_r: list        # K⁻¹ (x_r − T): the projected reference configuration
+    v_r: list        # K⁻¹ ẋ_r
+
+
+def _as_array(name: str) -> property:
+    return property(lambda self: np.array(getattr(self.floats, name)), doc=f"`{name}` as a numpy array")
+
+
+class GroupCoordinates:
+    """Everything the machine laws need about one group at one instant.
+
+    Held as Python floats (`floats`, what the laws compute with: short_vectors); each field is
+    also an attribute giving a numpy array (c.x, c.z, c.q_r, …) for analysis and tests."""
+
+    __slots__ = ("floats",)
+
+    def __init__(self, floats: CoordinateFloats):
+        self.floats = floats
+
+    x, x_dot, x_r, x_r_dot, x_r_ddot, z, q_r, v_r = (_as_array(name) for name in CoordinateFloats._fields)
 
     @property
     def inside(self) -> bool:
-        return all(xj < 0.0 for xj in self.x.tolist())
+        return all(xj < 0.0 for xj in self.floats.x)
 
 
-def coordinates(group: ConstraintGroup, q: np.ndarray, v: np.ndarray, desired: Desired, shape: ReferenceShape) -> GroupCoordinates:
-    """Evaluate (6)–(7) for one group. z is NaN where x ≥ 0 (the group does not apply).
+def coordinates(group: ConstraintGroup, q, v, desired: Desired, shape: ReferenceShape, rows=None) -> GroupCoordinates:
+    """Evaluate (6)–(7) for one group, row by row. z is NaN where x > 0 and −∞ where x = 0 (as
+    np.log(x / x_r)): the group does not apply there.
 
-    One product K·[q, v, q_d, q̇_d, q̈_d] gives x, ẋ and m, ṁ, m̈ of projected_reference (same formulas)."""
-    products = group.K @ np.array([q, v, desired.q, desired.q_dot, desired.q_ddot]).T
-    x = products[:, 0] + group.T
-    m_dot = products[:, 3]
-    x_r, d1, d2 = saturate(products[:, 2] + group.T, shape)
-    x_r_dot = d1 * m_dot
-    if all(xj < 0.0 for xj in x.tolist()):
-        z = np.log(x / x_r)
-    else:
-        with np.errstate(invalid="ignore", divide="ignore"):
-            z = np.log(x / x_r)
-    back = group.K_inv @ np.array([x_r - group.T, x_r_dot]).T
-    return GroupCoordinates(
-        x=x, x_dot=products[:, 1], x_r=x_r, x_r_dot=x_r_dot, x_r_ddot=d2 * m_dot**2 + d1 * products[:, 4], z=z,
-        q_r=back[:, 0], v_r=back[:, 1],
-    )
+    x, ẋ and m, ṁ, m̈ of projected_reference (same formulas) come from the group's rows; `rows`
+    may give (x, ẋ) already computed (e.g. from FeasibleSet.row_values)."""
+    f = group.floats
+    K, T = f.K, f.T
+    if rows is None:
+        rows = [kq + t for kq, t in zip(matvec(K, floats(q)), T)], matvec(K, floats(v))
+    x, x_dot = rows
+    x_r, s1, s2 = saturate_floats([m + t for m, t in zip(matvec(K, desired.q.tolist()), T)], shape)
+    m_dot, m_ddot = matvec(K, desired.q_dot.tolist()), matvec(K, desired.q_ddot.tolist())
+    x_r_dot = [d1 * md for d1, md in zip(s1, m_dot)]
+    x_r_ddot = [d2 * (md * md) + d1 * mdd for d1, d2, md, mdd in zip(s1, s2, m_dot, m_ddot)]
+    z = [_log_ratio(xj, xr) for xj, xr in zip(x, x_r)]
+    q_r = matvec(f.K_inv, [xr - t for xr, t in zip(x_r, T)])
+    return GroupCoordinates(CoordinateFloats(list(x), list(x_dot), x_r, x_r_dot, x_r_ddot, z, q_r, matvec(f.K_inv, x_r_dot)))
+
+
+def _log_ratio(x: float, x_r: float) -> float:
+    """ln(x / x_r) of (6) with numpy's values off the domain: −∞ at 0, NaN below."""
+    ratio = x / x_r
+    if ratio > 0.0:
+        return math.log(ratio)
+    return -math.inf if ratio == 0.0 else math.nan
+
+
+def reference_signals(c: CoordinateFloats, K, K_inv, v, lam: float):
+    """(p, ż, v_ref, v̇_ref) on floats at one instant, for velocity v (floats): ż = K v/x − ẋ_r/x_r
+    (equivalent to (9)), v_ref = K⁻¹[(1+λ) z + e^z ∘ ẋ_r], v̇_ref = K⁻¹[(1+λ) ż + e^z ∘ ż ∘ ẋ_r +
+    e^z ∘ ẍ_r] and p = v − v_ref (11). K, K_inv: the group's rows (ConstraintGroup.floats)."""
+    lam1 = 1.0 + lam
+    zd, lifted_v, lifted_a = [], [], []
+    for kv, xj, xr, xr_dot, xr_ddot, zj in zip(matvec(K, v), c.x, c.x_r, c.x_r_dot, c.x_r_ddot, c.z):
+        zdj = kv / xj - xr_dot / xr
+        ez = math.exp(zj)
+        zd.append(zdj)
+        lifted_v.append(lam1 * zj + ez * xr_dot)
+        lifted_a.append(lam1 * zdj + ez * zdj * xr_dot + ez * xr_ddot)
+    v_ref, a_ref = matvec(K_inv, lifted_v), matvec(K_inv, lifted_a)
+    return [vj - rj for vj, rj in zip(v, v_ref)], zd, v_ref, a_ref
 
 
 def z_dot(c: GroupCoordinates, x_dot: np.ndarray) -> np.ndarray:
@@ -103,65 +146,20 @@ def all_groups(stack: GroupStack, q: np.ndarray, v: np.ndarray, desired: Desired
     """Every group at once: (q_r G×n, selection value G) with value = ½(|z|² + |p|²), +∞ where x ≥ 0.
 
     The selection value is the measurable part of each law's Lyapunov function with unit
-    inertia (the true M is unknown to the machine); sharing.py picks its least.
+    inertia (the true M is unknown to the machine); sharing.py picks its least. One product with
+    the stacked rows (K_rows · [q, q_d, q̇_d]) gives every group's x, m, ṁ; one stacked product
+    applies every group's K⁻¹. Rows of groups that do not apply get z = 0 here (their
+    value is +∞ whatever z is), so no NaN is formed.
     """
-    groups = GroupsAtOnce.evaluate(stack, q, v, desired, shape, lam)
-    return groups.q_r, groups.value
-
-
-@dataclass(frozen=True)
-class GroupsAtOnce:
-    """Every group evaluated together (all_groups), keeping what `coordinates` needs for any one of them.
-
-    One product with the stacked rows (K_rows · [q, q_d, q̇_d, v, q̈_d]) gives every group's x, m, ṁ,
-    ẋ, m̈; one stacked product applies every group's K⁻¹. Rows of groups that do not apply get
-    z = 0 here (their value is +∞ whatever z is), so no NaN is formed; `coordinates(g)` restores
-    the NaN of `coordinates` for such a group.
-    """
-
-    stack: GroupStack
-    shape_n: tuple[int, int]
-    products: np.ndarray      # (G·n, 5): K q, K q_d, K q̇_d, K v, K q̈_d
-    x: np.ndarray
-    x_r: np.ndarray
-    d1: np.ndarray
-    d2: np.ndarray
-    x_r_dot: np.ndarray
-    z: np.ndarray
-    q_r: np.ndarray           # (G, n)
-    value: np.ndarray         # (G,)
-
-    @staticmethod
-    def evaluate(stack: GroupStack, q, v, desired: Desired, shape: ReferenceShape, lam: float) -> "GroupsAtOnce":
-        G, n = stack.T.shape
-        products = stack.K_rows @ np.array([q, desired.q, desired.q_dot, v, desired.q_ddot]).T
-        x = products[:, 0] + stack.T_rows
-        x_r, d1, d2 = saturate(products[:, 1] + stack.T_rows, shape)
-        x_r_dot = d1 * products[:, 2]
-        below = x < 0.0
-        z = np.log(np.where(below, x / x_r, 1.0))
-        lifted = np.empty((G, n, 2))
-        lifted[:, :, 0] = ((1.0 + lam) * z + np.exp(z) * x_r_dot).reshape(G, n)
-        lifted[:, :, 1] = (x_r - stack.T_rows).reshape(G, n)
-        mapped = stack.K_inv @ lifted                                           # (G, n, 2): K⁻¹ per group
-        p = v - mapped[:, :, 0]
-        value = 0.5 * ((z * z).reshape(G, n).sum(axis=1) + (p * p).sum(axis=1))
-        value[~below.reshape(G, n).all(axis=1)] = np.inf
-        return GroupsAtOnce(stack, (G, n), products, x, x_r, d1, d2, x_r_dot, z, mapped[:, :, 1], value)
-
-    def coordinates(self, g: int, group: ConstraintGroup) -> GroupCoordinates:
-        """`coordinates(group, q, v, desired, shape)` for group g (= `group`), from what is already computed."""
-        n = self.shape_n[1]
-        rows = slice(g * n, (g + 1) * n)
-        x, x_r, x_r_dot = self.x[rows], self.x_r[rows], self.x_r_dot[rows]
-        if all(xj < 0.0 for xj in x.tolist()):
-            z = self.z[rows]
-        else:
-            with np.errstate(invalid="ignore", divide="ignore"):
-                z = np.log(x / x_r)
-        m_dot, m_ddot = self.products[rows, 2], self.products[rows, 4]
-        return GroupCoordinates(
-            x=x, x_dot=self.products[rows, 3], x_r=x_r, x_r_dot=x_r_dot,
-            x_r_ddot=self.d2[rows] * m_dot**2 + self.d1[rows] * m_ddot, z=z,
-            q_r=self.q_r[g], v_r=group.K_inv @ x_r_dot,
-        )
+    G, n = stack.T.shape
+    products = stack.K_rows @ np.array([q, desired.q, desired.q_dot]).T
+    x = products[:, 0] + stack.T_rows
+    x_r, d1, _ = saturate(products[:, 1] + stack.T_rows, shape)
+    below = x < 0.0
+    z = np.log(np.where(below, x / x_r, 1.0))
+    lifted = np.array([(1.0 + lam) * z + np.exp(z) * (d1 * products[:, 2]), x_r - stack.T_rows]).T
+    mapped = stack.K_inv_blocks @ lifted                 # (G·n, 2): every group's v_ref and q_r
+    p = v - mapped[:, 0].reshape(G, n)
+    value = 0.5 * ((z * z).reshape(G, n).sum(axis=1) + (p * p).sum(axis=1))
+    value[~below.reshape(G, n).all(axis=1)] = np.inf
+    return mapped[:, 1].reshape(G, n), value

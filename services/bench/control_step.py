@@ -107,19 +107,22 @@ def breakdown(law: str = "ce", repeats: int = 2000) -> dict:
     state, q, v, operator = chosen
     feasible, reference, machine = loop.feasible, loop.reference, loop.controller
     v_used = v if feedback else machine.observer.velocity(q, state.observer)
-    q_r, values = all_groups(feasible.stack, q, v_used, operator.desired, reference, machine.tracking.lam)
-    ok = feasible.reference_inside(q_r)
-    lyapunov = values.tolist().__getitem__
+    q_list, v_list = q.tolist(), v_used.tolist()
+    rows = feasible.row_values(q_list, v_list)
+    values = all_groups(feasible.stack, q, v_used, operator.desired, reference, machine.tracking.lam)[1].tolist()
     grp = feasible.groups[state.arbiter.group]
-    c = coordinates(grp, q, v_used, operator.desired, reference)
+    group_rows = feasible.group_rows(state.arbiter.group, rows)
+    c = coordinates(grp, q_list, v_list, operator.desired, reference, group_rows)
     law_ = machine.law(state.law_role)
     parts = {
-        "all_groups": lambda: all_groups(feasible.stack, q, v_used, operator.desired, reference, machine.tracking.lam),
-        "reference_inside": lambda: feasible.reference_inside(q_r),
-        "arbitrate": lambda: arbitrate(feasible, loop.sharing, state.arbiter, q, v_used, operator.intent, PERIOD, lyapunov, ok),
-        "coordinates": lambda: coordinates(grp, q, v_used, operator.desired, reference),
+        "row_values": lambda: feasible.row_values(q_list, v_list),
+        "arbitrate": lambda: arbitrate(feasible, loop.sharing, state.arbiter, q, v_used, operator.intent, PERIOD,
+                                       values.__getitem__, [True] * len(values), rows),
+        "coordinates": lambda: coordinates(grp, q_list, v_list, operator.desired, reference, group_rows),
         "law_evaluate": lambda: law_.evaluate(loop.model, grp, c, q, v_used, state.theta_hat, state.law_state),
-        "region_margins": lambda: feasible.region_margins(q),
+        "region_margins": lambda: feasible.region_margins(q, rows[0]),
+        # only on samples that select a group (take-over, operator in charge): not in this one
+        "all_groups_on_demand": lambda: all_groups(feasible.stack, q, v_used, operator.desired, reference, machine.tracking.lam),
         "whole_step": lambda: controller.step(state, q, v if feedback else None, operator, PERIOD),
     }
     return {name: _median_us(fn, repeats) for name, fn in parts.items()}

@@ -58,19 +58,22 @@ def render(report: dict) -> str:
                 for r in detail["scaling_groups"]]
     if detail.get("profile"):
         out += ["", "Profile (cProfile, CE along the trajectory, by own time):", "", "```", detail["profile"], "```"]
-    out += ["", "## Loop, latency, bus, CPU", "", "| figure | 500 Hz | 1 kHz | 500 Hz, --sensor-sync |", "|---|---:|---:|---:|"]
-    runs = ("loop", "loop_1khz", "loop_sensor_sync")
+    # the third run: free-running ticks since sensor sync became the default; reports from before: --sensor-sync
+    third, label = (("loop_free_running", "--no-sensor-sync") if "loop_free_running" in report
+                    else ("loop_sensor_sync", "--sensor-sync"))
+    out += ["", "## Loop, latency, bus, CPU", "", f"| figure | 500 Hz | 1 kHz | 500 Hz, {label} |", "|---|---:|---:|---:|"]
+    runs = ("loop", "loop_1khz", third)
     for key in ("rate_hz", "deadline_misses", "jitter_p50_us", "jitter_p99_us", "periods_without_torque_on_bus"):
         out.append(f"| loop {key} | " + " | ".join(_fmt(lookup(report, f"{r}.{key}")) for r in runs) + " |")
     for key in ("missed", "late", "estops", "lateness_p99_us", "compute_p50_us", "compute_p99_us"):
         out.append(f"| daemon {key} | " + " | ".join(_fmt(lookup(report, f"{r}.daemon.{key}")) for r in runs) + " |")
-    sensor = ("latency.sensor_to_torque_us", "loop_1khz.sensor_to_torque_us", "loop_sensor_sync.sensor_to_torque_us")
+    sensor = ("latency.sensor_to_torque_us", "loop_1khz.sensor_to_torque_us", f"{third}.sensor_to_torque_us")
     out.append("| sensor → torque p50 / p99 µs | " + " | ".join(
         f"{_fmt(lookup(report, s + '.p50'))} / {_fmt(lookup(report, s + '.p99'))}" for s in sensor) + " |")
     out.append(f"| operator → torque p50 / p99 µs | {_fmt(lookup(report, 'latency.operator_to_torque_us.p50'))} / "
                f"{_fmt(lookup(report, 'latency.operator_to_torque_us.p99'))} | | "
-               f"{_fmt(lookup(report, 'loop_sensor_sync.operator_to_torque_us.p50'))} / "
-               f"{_fmt(lookup(report, 'loop_sensor_sync.operator_to_torque_us.p99'))} |")
+               f"{_fmt(lookup(report, f'{third}.operator_to_torque_us.p50'))} / "
+               f"{_fmt(lookup(report, f'{third}.operator_to_torque_us.p99'))} |")
     for key in ("zenoh_floor_us", "can_floor_us"):
         out.append(f"| {key.removesuffix('_us').replace('_', ' ')} p50 / p99 µs | {_fmt(lookup(report, f'latency.{key}.p50'))} / "
                    f"{_fmt(lookup(report, f'latency.{key}.p99'))} | | |")

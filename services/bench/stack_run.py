@@ -10,8 +10,11 @@ timestamps over Zenoh and over a second udp_multicast port: the transport floors
   |Δt − T| and periods without a burst; the daemon's own summary line (missed/late ticks, wake-up
   lateness, compute time) is parsed too.
 * sensor → torque: for each burst, the age of the wheel estimates the tick used: the oldest of
-  the three axes' newest Get_Encoder_Estimates that arrived before the burst minus the daemon's
-  median compute time (a frame arriving during the computation was not used).
+  the three axes' newest Get_Encoder_Estimates that arrived before the tick started — the burst
+  minus the daemon's median "torque out" time (tick start → torque frames sent; its summary line),
+  since a frame arriving during the computation was not used. (The daemon's whole compute time,
+  used before it reported the send time, also counts the telemetry after the send: it cut off
+  frames the tick had used and charged it the previous period's.)
 * operator → torque: the operator's y deflection alternates sign every command; the latency of a
   command is from its send time to the first torque burst whose sign follows it.
 * bus load: every frame seen on the bus in the window, worst-case stuffed (bus_load.py).
@@ -51,7 +54,8 @@ SETTLE = 2.5               # s after start before the window opens (arming, Zeno
 SUMMARY = re.compile(
     r"(?P<ticks>\d+) ticks at (?P<rate>[\d.]+) Hz, (?P<missed>\d+) missed / (?P<late>\d+) late deadlines, "
     r"jitter p50 (?P<j50>[\d.]+) ms p99 (?P<j99>[\d.]+) ms max (?P<jmax>[\d.]+) ms, "
-    r"compute p50 (?P<c50>[\d.]+) ms p99 (?P<c99>[\d.]+) ms, CPU (?P<cpu>\d+)%"
+    r"compute p50 (?P<c50>[\d.]+) ms p99 (?P<c99>[\d.]+) ms, "
+    r"(?:torque out p50 (?P<o50>[\d.]+) ms p99 (?P<o99>[\d.]+) ms, )?CPU (?P<cpu>\d+)%"
 )
 
 
@@ -229,7 +233,9 @@ def _daemon_summary(controller: children.Child) -> dict:
             "rate_hz": float(g["rate"]), "missed": int(g["missed"]), "late": int(g["late"]),
             "lateness_p50_us": float(g["j50"]) * 1e3, "lateness_p99_us": float(g["j99"]) * 1e3,
             "lateness_max_us": float(g["jmax"]) * 1e3, "compute_p50_us": float(g["c50"]) * 1e3,
-            "compute_p99_us": float(g["c99"]) * 1e3, "cpu_percent": int(g["cpu"])}
+            "compute_p99_us": float(g["c99"]) * 1e3, "cpu_percent": int(g["cpu"]),
+            "torque_out_p50_us": float(g["o50"]) * 1e3 if g["o50"] else None,
+            "torque_out_p99_us": float(g["o99"]) * 1e3 if g["o99"] else None}
 
 
 def _cpu(start, end) -> dict:
@@ -262,7 +268,11 @@ def analyse(frames: list[Frame], operator_log, window, rate_hz: float, summary: 
         "bursts": len(bursts),
         "daemon": summary,
     }
-    compute = summary.get("compute_p50_us", 0.0) * 1e-6 if summary else 0.0
+    # frames that arrived after the tick started were not used by it: the tick started the daemon's median
+    # "torque out" time (tick start → frames handed to the bus) before the burst; an older daemon reports
+    # only its whole compute time (which includes the telemetry after the send)
+    before_send = (summary.get("torque_out_p50_us") or summary.get("compute_p50_us", 0.0)) if summary else 0.0
+    compute = before_send * 1e-6
     loop["sensor_age_excludes_compute_us"] = compute * 1e6
     sensor = _sensor_ages(bursts, encoder, compute)
     operator = _operator_latencies(first_frames, torque, operator_log, period)

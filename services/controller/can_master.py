@@ -11,7 +11,11 @@
 * Receive path: the frames this side sends (Set_*, Estop, Clear_Errors, RTR polls) come back
   on udp_multicast and are ignored; a frame the codec refuses is counted and skipped.
 
-Frames are built and read only with `sharedctl.protocol.cansimple`.
+Frames are built and read with `sharedctl.protocol.cansimple`, except on the two paths that run
+every period (frame_layout.py): Set_Input_Torque is packed, and Get_Encoder_Estimates and the
+Set_Input_Torque echoes are read, straight from the codec's frame layout, by the arbitration id
+first. They accept and refuse exactly what the codec does (a frame they do not accept goes on to
+the codec, which counts it as bad); tests/services/test_controller_frame_layout.py holds them to it.
 """
 from __future__ import annotations
 
@@ -26,6 +30,7 @@ from sharedctl.protocol.canframe import DEFAULT_WHEEL_NODES
 from sharedctl.protocol.errors import ProtocolError
 from sharedctl.protocol.odrive_enums import AxisState, ControlMode, InputMode, ODriveError
 
+from . import frame_layout
 from .encoder_check import EncoderCheck
 from .odometry import AxisEstimate
 
@@ -74,16 +79,22 @@ class CanMaster:
     arm_attempts: int = 0
     arm_requested_at: float | None = None
     events: list = field(default_factory=list)
+    fast_paths: bool = True                      # the per-period frames by their layout (frame_layout.py)
 
     def __post_init__(self) -> None:
         self.axes = {n: AxisStatus(n) for n in self.nodes}
+        self._torque_ids = {n: frame_layout.torque_id(n) for n in self.nodes}
+        self._node_ids = frozenset(self.nodes)
 
     # ------------------------------------------------------------------ send
     def send(self, message) -> bool:
         frame = cs.encode(message)
+        return self._send_frame(frame.arbitration_id, frame.data, frame.is_remote, frame.dlc)
+
+    def _send_frame(self, arbitration_id: int, data: bytes, remote: bool = False, dlc: int | None = None) -> bool:
         msg = can.Message(
-            arbitration_id=frame.arbitration_id, data=frame.data, is_remote_frame=frame.is_remote,
-            dlc=frame.dlc, is_extended_id=False,
+            arbitration_id=arbitration_id, data=data, is_remote_frame=remote,
+            dlc=len(data) if dlc is None else dlc, is_extended_id=False,
         )
         try:
             self.bus.send(msg, timeout=0.01)
@@ -128,8 +139,14 @@ class CanMaster:
         self.arm_requested_at = None
 
     def send_torques(self, torques) -> None:
+        """Set_Input_Torque to every axis (a non-finite torque raises the codec's NonFiniteValue, as
+        building the frame does)."""
+        if not self.fast_paths:
+            for n, tau in zip(self.nodes, torques):
+                self.send(cs.SetInputTorque(n, float(tau)))
+            return
         for n, tau in zip(self.nodes, torques):
-            self.send(cs.SetInputTorque(n, float(tau)))
+            self._send_frame(self._torque_ids[n], frame_layout.torque_data(float(tau)))
 
     def estop_all(self) -> None:
         for n in self.nodes:
@@ -168,6 +185,15 @@ class CanMaster:
     def handle(self, msg, now: float) -> None:
         """One received python-can message: decode, ignore our own direction, update the axes."""
         self.rx_frames += 1
+        if self.fast_paths and msg.is_extended_id is False and msg.is_remote_frame is False:
+            kind = frame_layout.classify(msg.arbitration_id, msg.dlc, msg.data, self._node_ids)
+            if kind is frame_layout.ECHO:
+                self.echoes_ignored += 1
+                return
+            if kind is frame_layout.ENCODER:
+                pos, vel = frame_layout.encoder_values(msg.data)
+                self._encoder(self.axes[msg.arbitration_id >> 5], pos, vel, now)
+                return
         try:
             frame = cs.decode(
                 msg.arbitration_id, bytes(msg.data), msg.is_remote_frame, dlc=msg.dlc,
@@ -184,13 +210,15 @@ class CanMaster:
             return
         axis = self.axes[frame.node_id]
         if isinstance(frame, cs.GetEncoderEstimates):
-            axis.estimate, reason = self.encoder_check.judge(axis.estimate, frame.pos_estimate, frame.vel_estimate,
-                                                             now, axis.positions_rejected_in_a_row)
-            if reason is not None:
-                self.implausible_estimates[reason] += 1
-            axis.positions_rejected_in_a_row = axis.positions_rejected_in_a_row + 1 if reason else 0
+            self._encoder(axis, frame.pos_estimate, frame.vel_estimate, now)
         elif isinstance(frame, cs.Heartbeat):
             self._heartbeat(axis, frame, now)
+
+    def _encoder(self, axis: AxisStatus, pos: float, vel: float, now: float) -> None:
+        axis.estimate, reason = self.encoder_check.judge(axis.estimate, pos, vel, now, axis.positions_rejected_in_a_row)
+        if reason is not None:
+            self.implausible_estimates[reason] += 1
+        axis.positions_rejected_in_a_row = axis.positions_rejected_in_a_row + 1 if reason else 0
 
     def _heartbeat(self, axis: AxisStatus, frame: cs.Heartbeat, now: float) -> None:
         error = ODriveError(frame.axis_error)

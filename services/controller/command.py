@@ -5,11 +5,13 @@
                          [--zenoh-listen EP]… [--zenoh-connect EP]… [--robot-id ID]
                          [--rate 500] [--telemetry-rate 50] [--torque-limit 60] [--duration S]
                          [--feedback-timeout-ms 50] [--priority realtime|high|normal] [--quiet]
+                         [--[no-]sensor-sync] [--sensor-lead-us 250] [--spin-us 100]
                          [--lease implicit|explicit] [--lease-expiry-ms 1000] [--max-command-age-ms 500]
                          [--max-clock-skew-ms MS]
 """
 from __future__ import annotations
 
+import argparse
 import sys
 
 from sharedctl.protocol.keys import check_robot_id
@@ -51,8 +53,15 @@ def add_parser(subparsers) -> None:
                    help="scheduling: realtime = nice -10 and SCHED_FIFO 20 for the loop thread (default; falls back "
                         "when not permitted), high = nice -10 only, normal")
     p.add_argument("--quiet", action="store_true", help="no warnings on stderr (events are still published)")
-    p.add_argument("--sensor-sync", action="store_true",
-                   help="lock the tick phase to the wheel estimates' arrival (lower sensor → torque latency; phase.py)")
+    p.add_argument("--sensor-sync", action=argparse.BooleanOptionalAction, default=True,
+                   help="lock the tick phase to the wheel estimates' arrival (default; lower sensor → torque latency; "
+                        "phase.py); --no-sensor-sync: free-running ticks")
+    p.add_argument("--sensor-lead-us", type=float, default=250.0,
+                   help="with --sensor-sync: start each tick this long after the wheel estimates arrive (default 250: "
+                        "above the drives' send jitter, so a tick rarely starts before its estimates)")
+    p.add_argument("--spin-us", type=float, default=100.0,
+                   help="poll the clock for this long before each deadline instead of sleeping (default 100; "
+                        "0: plain sleep; costs at most this much CPU per tick)")
     p.add_argument("--lease", choices=("implicit", "explicit"), default="implicit",
                    help="operator authority lease: implicit = a command while nobody holds control takes it "
                         "(default); explicit = only a take on the lease queryable (or in-band) grants control")
@@ -73,6 +82,8 @@ def run(args) -> int:
         robot_id = check_robot_id(args.robot_id)
         if not (args.rate > 0 and args.telemetry_rate > 0 and args.torque_limit > 0 and args.feedback_timeout_ms > 0):
             raise ValueError("--rate, --telemetry-rate, --torque-limit and --feedback-timeout-ms must be positive")
+        if not 0.0 <= args.spin_us < 1e6 / args.rate or not 0.0 <= args.sensor_lead_us < 1e6 / args.rate:
+            raise ValueError("--spin-us and --sensor-lead-us must be ≥ 0 and shorter than the control period")
         if not (args.lease_expiry_ms > 0 and args.max_command_age_ms > 0
                 and (args.max_clock_skew_ms is None or args.max_clock_skew_ms > 0)):
             raise ValueError("--lease-expiry-ms, --max-command-age-ms and --max-clock-skew-ms must be positive")
@@ -88,7 +99,8 @@ def run(args) -> int:
     config = DaemonConfig(
         robot_id=robot_id, rate=args.rate, telemetry_rate=args.telemetry_rate, torque_limit=args.torque_limit,
         feedback_timeout=args.feedback_timeout_ms / 1e3, duration=args.duration, verbose=not args.quiet,
-        realtime=args.priority == "realtime", sensor_sync=args.sensor_sync, lease_mode=args.lease, lease_expiry=args.lease_expiry_ms / 1e3,
+        realtime=args.priority == "realtime", sensor_sync=args.sensor_sync, sensor_lead=args.sensor_lead_us / 1e6,
+        spin=args.spin_us / 1e6, lease_mode=args.lease, lease_expiry=args.lease_expiry_ms / 1e3,
         max_command_age=args.max_command_age_ms / 1e3,
         max_clock_skew=None if args.max_clock_skew_ms is None else args.max_clock_skew_ms / 1e3,
     )

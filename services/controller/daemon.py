@@ -4,9 +4,15 @@ Every control period (500 Hz by default, `RateClock`):
   1. latest wheel encoder estimates → odometry (q, q̇)                    (odometry.py)
   2. latest operator command → OperatorInput, with the staleness policy   (operator_input.py)
   3. `SharedController.step(state, q, q̇ or None, operator, dt)`          (sharedctl; None for `of`)
-  4. τ = B(ψ)⁻¹ u_s (`OmniRobot.wheel_torques`), scaled down uniformly so that max|τ_j| ≤ the
-     torque limit (the direction of u_s is kept), Set_Input_Torque to every axis  (can_master.py)
-then it reads CAN frames until just before the next tick. RobotState goes out at the telemetry
+  4. τ = B(ψ)⁻¹ u_s (`OmniRobot.wheel_torques`, in closed form: wheel_kinematics.py), scaled down
+     uniformly so that max|τ_j| ≤ the torque limit (the direction of u_s is kept), Set_Input_Torque
+     to every axis                                                         (can_master.py)
+then it reads CAN frames until just before the next tick, judging queued operator commands on
+the way. Timing (docs/performance.md): the next deadline is locked to `sensor_lead` after the
+wheel estimates arrive (phase.py, on by default); the last `spin` before it is polled rather than
+slept (`RateClock`); the Zenoh callback only queues a command's bytes, so no other thread holds
+the GIL or the policy lock for a decode while the loop waits for them; a warm-up step runs and
+`gc.freeze()` is called before the clock starts. RobotState goes out at the telemetry
 rate, events when something changes (rate-limited), a Heartbeat message at 1 Hz and a
 liveliness token for as long as the daemon runs.
 
@@ -25,11 +31,13 @@ the total goes out as `link.rejected_messages`.
 from __future__ import annotations
 
 import enum
+import gc
 import math
 import sys
 import threading
 import time
-from dataclasses import dataclass, field
+from collections import deque
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -43,13 +51,18 @@ from ..lifecycle import RateClock
 from . import lease_queries
 from .can_master import CanMaster
 from .lease import DEFAULT_EXPIRY, LeaseMode, OperatorLease
-from .odometry import WheelOdometry, feedback_ages
+from .loop_summary import LatenessHistogram, Summary
+from .odometry import WheelOdometry, oldest_feedback_age
 from .phase import SensorPhaseLock, estimates_arrival
 from .operator_input import OperatorInputPolicy
 from .replay_guard import DEFAULT_MAX_AGE, ReplayGuard
 from .telemetry import EventLimiter, Link, robot_state
+from .wheel_kinematics import WheelKinematics
 
 ROLE = "controller"
+MAX_PENDING_COMMANDS = 1000   # operator payloads queued between two visits of the loop (~2 ms)
+RECEIVE_SLICE = 5e-4          # s: the loop applies queued operator commands at least this often between ticks
+RECEIVE_MARGIN = 2e-4         # s: reading CAN frames stops this long before a deadline that is slept to
 
 
 class Mode(enum.Enum):
@@ -71,71 +84,13 @@ class DaemonConfig:
     event_interval: float = 1.0         # s between events of one topic
     verbose: bool = True                # warnings and errors to stderr
     realtime: bool = False              # the loop thread asks for SCHED_FIFO (priority.py)
-    sensor_sync: bool = False           # lock the tick phase to the wheel estimates' arrival (phase.py)
+    sensor_sync: bool = True            # lock the tick phase to the wheel estimates' arrival (phase.py)
+    sensor_lead: float = 2.5e-4         # s after the estimates' arrival at which a synchronised tick starts
+    spin: float = 1e-4                  # s before each deadline polled instead of slept (lifecycle.RateClock)
     lease_mode: str = LeaseMode.IMPLICIT  # implicit: a command takes a free lease; explicit: only a take (lease.py)
     lease_expiry: float = DEFAULT_EXPIRY  # s without commands/takes from the holder → lease free
     max_command_age: float = DEFAULT_MAX_AGE  # s later than the session's best delivery → stale (replay_guard.py)
     max_clock_skew: float | None = None   # s, |receive wall − send_time| bound; None: hosts not synchronised
-
-
-class LatenessHistogram:
-    """Tick lateness in 10 µs bins up to 50 ms (quantiles over the whole run, fixed memory)."""
-
-    BIN = 1e-5
-
-    def __init__(self, bins: int = 5000) -> None:
-        self.counts = np.zeros(bins + 1, dtype=np.int64)
-        self.n = 0
-        self.max = 0.0
-
-    def add(self, lateness: float) -> None:
-        self.counts[min(int(lateness / self.BIN), len(self.counts) - 1)] += 1
-        self.n += 1
-        self.max = max(self.max, lateness)
-
-    def quantile(self, p: float) -> float:
-        if self.n == 0:
-            return 0.0
-        k = int(np.searchsorted(np.cumsum(self.counts), math.ceil(p * self.n)))
-        return (k + 1) * self.BIN
-
-
-@dataclass
-class Summary:
-    ticks: int = 0
-    elapsed: float = 0.0
-    rate: float = 0.0
-    missed: int = 0
-    late: int = 0
-    jitter_p50_ms: float = 0.0
-    jitter_p99_ms: float = 0.0
-    jitter_max_ms: float = 0.0
-    cpu_percent: float = 0.0
-    compute_p50_ms: float = 0.0
-    compute_p99_ms: float = 0.0
-    frames_rx: int = 0
-    frames_tx: int = 0
-    bad_frames: int = 0
-    implausible_estimates: int = 0
-    commands_accepted: int = 0
-    rejections: dict = field(default_factory=dict)
-    estops: int = 0
-    saturated: int = 0
-    mode: str = ""
-
-    def line(self) -> str:
-        rej = sum(self.rejections.values())
-        detail = ", ".join(f"{k} {v}" for k, v in sorted(self.rejections.items()))
-        return (
-            f"sharedctl controller: stopped after {self.elapsed:.1f} s: {self.ticks} ticks at {self.rate:.1f} Hz, "
-            f"{self.missed} missed / {self.late} late deadlines, jitter p50 {self.jitter_p50_ms:.3f} ms "
-            f"p99 {self.jitter_p99_ms:.3f} ms max {self.jitter_max_ms:.2f} ms, compute p50 {self.compute_p50_ms:.3f} ms "
-            f"p99 {self.compute_p99_ms:.3f} ms, CPU {self.cpu_percent:.0f}% of one core; "
-            f"CAN frames rx {self.frames_rx} tx {self.frames_tx} bad {self.bad_frames}, implausible encoder values "
-            f"{self.implausible_estimates}; operator commands "
-            f"{self.commands_accepted} accepted, {rej} rejected{f' ({detail})' if detail else ''}; "
-            f"estops {self.estops}, torque-limited ticks {self.saturated}"
-        )
 
 
 class ControllerDaemon:
@@ -152,6 +107,7 @@ class ControllerDaemon:
         self.state = self.controller.initial_state(q0, loop.theta_hat0)
         self.dims = Dims(dof=self.model.n, n_theta=self.model.n_theta, n_wheels=3)
         self.odometry = WheelOdometry(self.model, q0)
+        self.kinematics = WheelKinematics.for_model(self.model)   # τ = B(ψ)⁻¹ u in closed form
         self.policy = OperatorInputPolicy(loop.human.kp, config.operator_timeout, self.dims,
                                           lease=OperatorLease(config.lease_expiry, config.lease_mode),
                                           guard=ReplayGuard(config.max_command_age, config.max_clock_skew))
@@ -160,6 +116,8 @@ class ControllerDaemon:
         self.session = session
         self.events = EventLimiter(config.event_interval, ROLE)
         self.lock = threading.Lock()
+        self.pending_commands: deque = deque()   # (payload, monotonic, wall) from the Zenoh thread
+        self.commands_overflowed = 0             # payloads refused because the queue was full
         self.mode = Mode.ARMING
         self.period = 1.0 / config.rate
         self.q = np.asarray(q0, float).copy()
@@ -181,9 +139,10 @@ class ControllerDaemon:
         self.last_rejected = 0
         self.histogram = LatenessHistogram()     # tick lateness (jitter)
         self.compute = LatenessHistogram()       # tick compute time (control + telemetry)
+        self.torque_out = LatenessHistogram()    # tick start → Set_Input_Torque frames handed to the bus
         self.late = 0
         self.realtime = False
-        self.phase_lock = SensorPhaseLock(self.period) if config.sensor_sync else None
+        self.phase_lock = SensorPhaseLock(self.period, lead=config.sensor_lead) if config.sensor_sync else None
         self._declare(session)
 
     # ------------------------------------------------------------------ Zenoh
@@ -197,13 +156,30 @@ class ControllerDaemon:
         self.queryable = session.declare_queryable(keys.lease_key(robot), self._on_lease_query)
 
     def _on_command(self, sample) -> None:
-        """Zenoh callback thread: hand the payload to the policy (which never raises)."""
+        """Zenoh callback thread: queue the payload with its arrival times; the loop thread judges it
+        (`apply_commands`). Only an append here: a callback thread that held the GIL or the policy
+        lock for a decode and was then preempted would stall the real-time loop thread behind it."""
         try:
             payload = sample.payload.to_bytes()
         except Exception:  # noqa: BLE001
             payload = b""
-        with self.lock:
-            self.policy.offer(payload, time.monotonic(), time.time())
+        if len(self.pending_commands) >= MAX_PENDING_COMMANDS:
+            self.commands_overflowed += 1        # counted as a rejection by apply_commands
+            return
+        self.pending_commands.append((payload, time.monotonic(), time.time()))
+
+    def apply_commands(self) -> None:
+        """Hand the queued operator payloads to the policy, in arrival order (caller holds `lock`).
+
+        Called by the loop between CAN frames and before each tick, and before a lease query is
+        answered, so a take or release is judged after every command that arrived before it."""
+        pending = self.pending_commands
+        while pending:
+            payload, now, wall = pending.popleft()
+            self.policy.offer(payload, now, wall)
+        if self.commands_overflowed:
+            overflowed, self.commands_overflowed = self.commands_overflowed, 0
+            self.policy.rejections["command_queue_full"] += overflowed
 
     def _on_lease_query(self, query) -> None:
         """Zenoh callback thread: take/release control (lease_queries.py); every query gets a reply."""
@@ -212,6 +188,7 @@ class ControllerDaemon:
         except Exception:  # noqa: BLE001
             payload = b""
         with self.lock:
+            self.apply_commands()
             reply = lease_queries.answer(payload, self.policy.lease, self.lease_guard, self.policy.rejections,
                                          time.monotonic(), time.time())
         try:
@@ -240,7 +217,10 @@ class ControllerDaemon:
     # ------------------------------------------------------------------- loop
     def run(self, stop) -> Summary:
         config = self.config
-        clock = RateClock(self.period)
+        self.warm_up()
+        gc.collect()
+        gc.freeze()      # start-up objects (scenario, Zenoh, numpy) out of the collector's way: shorter pauses
+        clock = RateClock(self.period, spin=config.spin)
         telemetry_every = max(1, round(config.rate / config.telemetry_rate))
         heartbeat_every = max(1, round(config.rate))
         cpu0, t0 = time.process_time(), time.monotonic()
@@ -265,7 +245,7 @@ class ControllerDaemon:
                 self.compute.add(time.monotonic() - now)
                 if self.phase_lock is not None and (arrival := estimates_arrival(self.master.estimates())) is not None:
                     clock.next += self.phase_lock.correction(clock.next, arrival)
-                self.master.receive_until(clock.next - 2e-4)
+                self.receive_until(clock.next - (config.spin if config.spin > 0 else RECEIVE_MARGIN))
         finally:
             self.shutdown()
         elapsed = time.monotonic() - t0
@@ -276,6 +256,7 @@ class ControllerDaemon:
             jitter_p99_ms=self.histogram.quantile(0.99) * 1e3, jitter_max_ms=self.histogram.max * 1e3,
             cpu_percent=100.0 * cpu / elapsed if elapsed > 0 else 0.0,
             compute_p50_ms=self.compute.quantile(0.5) * 1e3, compute_p99_ms=self.compute.quantile(0.99) * 1e3,
+            torque_out_p50_ms=self.torque_out.quantile(0.5) * 1e3, torque_out_p99_ms=self.torque_out.quantile(0.99) * 1e3,
             frames_rx=self.master.rx_frames,
             frames_tx=self.master.tx_frames, bad_frames=self.master.bad_frame_count,
             implausible_estimates=sum(self.master.implausible_estimates.values()),
@@ -283,14 +264,44 @@ class ControllerDaemon:
             saturated=self.saturated, mode=self.mode.value,
         )
 
+    def warm_up(self) -> None:
+        """One control step and one RobotState built and encoded, all discarded, before the clock starts.
+
+        The first run of each path (lazy imports, caches, the allocator's first arenas) costs
+        milliseconds; without this, those are the loop's first deadlines. The step is a function of
+        the state passed in (nothing is sent, no state is kept); the policy has no command yet."""
+        try:
+            with self.lock:
+                operator, _ = self.policy.operator_input(time.monotonic(), self.q)
+            _, out = self.controller.step(self.state, self.q, None if self.output_feedback else self.v, operator,
+                                          self.period)
+            self.kinematics.wheel_torques(self.q, out.u_s)
+            msg = robot_state(0, time.time(), self.q, self.v, out, self.loop.feasible, self.loop.sharing.bands,
+                              np.zeros(3), out.u_s, False, None, Link(0.0, 0.0, math.inf, math.inf), out.theta_estimate)
+            encode_message(msg, self.dims)
+        except Exception:  # noqa: BLE001 — only a warm-up: the loop reports whatever this hit
+            pass
+
+    def receive_until(self, deadline: float) -> None:
+        """CAN frames until `deadline`, applying queued operator commands every `RECEIVE_SLICE` on the way
+        (so that judging them rarely falls into the next tick)."""
+        while True:
+            self.master.receive_until(min(deadline, time.monotonic() + RECEIVE_SLICE))
+            if self.pending_commands:
+                with self.lock:
+                    self.apply_commands()
+            if time.monotonic() >= deadline:
+                return
+
     def tick(self, now: float) -> None:
         estimates = self.master.estimates()
         self.q, v = self.odometry.update(estimates)
         self.v = v
-        feedback_age = float(np.max(feedback_ages(estimates, now)))
+        feedback_age = oldest_feedback_age(estimates, now)
         for ev in self.master.take_events():
             self.emit(now, f"can:{ev.text[:8]}", ev.kind, ev.severity, ev.text)
         with self.lock:
+            self.apply_commands()
             operator, status = self.policy.operator_input(now, self.q)
             take_requests = self.policy.take_requests
             current = self.policy.current
@@ -346,20 +357,23 @@ class ControllerDaemon:
         self.last_step_at = now
         try:
             self.state, out = self.controller.step(self.state, self.q, None if self.output_feedback else self.v, operator, dt)
-            tau = self.model.wheel_torques(self.q, out.u_s)
-            if not np.all(np.isfinite(tau)):
+            u_s = out.u_s.tolist() if isinstance(out.u_s, np.ndarray) else out.u_s
+            tau = self.kinematics.wheel_torques(self.q, u_s)
+            if not all(math.isfinite(t) for t in tau):
                 raise NonFiniteCommand("non-finite wheel torque")
         except NonFiniteCommand as exc:
             self.tau, self.u_s = np.zeros(3), np.zeros(self.model.n)
             self.master.send_torques(self.tau)
             self.estop(now, f"non-finite command: {exc}")
             return
-        peak = float(np.max(np.abs(tau)))
+        peak = max(abs(t) for t in tau)
         if peak > self.config.torque_limit:
-            tau = tau * (self.config.torque_limit / peak)
+            scale = self.config.torque_limit / peak
+            tau = tuple(t * scale for t in tau)
             self.saturated += 1
-        self.out, self.u_s, self.tau = out, out.u_s, tau
+        self.out, self.u_s, self.tau = out, out.u_s, np.array(tau)
         self.master.send_torques(tau)
+        self.torque_out.add(time.monotonic() - now)
         if out.set_class != self.last_set_class:
             if self.last_set_class is not None:
                 self.emit(now, "set", "set_transition", "info",

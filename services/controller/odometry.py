@@ -4,7 +4,8 @@ Pure: encoder estimates and their reception times in, (q, q̇) out; no clock, no
 
 The encoders report wheel position (turns) and speed (turns/s), positive in the direction
 of positive ω_j (docs/services.md, "Units"). With ω = 2π·vel (rad/s) the body velocity is
-q̇ = B(ψ)⁻ᵀ ω (`OmniRobot.body_velocity_from_wheels`). The pose is integrated from the
+q̇ = B(ψ)⁻ᵀ ω (`OmniRobot.body_velocity_from_wheels`, here in closed form:
+wheel_kinematics.py). The pose is integrated from the
 scenario's initial q with the wheel *angle increments* Δφ = 2π·Δpos between two updates,
 Δq = B(ψ_mid)⁻ᵀ Δφ at the mid-step yaw. That is the trapezoidal rule for q̇ = B(ψ)⁻ᵀ φ̇
 without needing a time base: a late or jittered update loses no distance, and the
@@ -18,6 +19,8 @@ import math
 from dataclasses import dataclass, field
 
 import numpy as np
+
+from .wheel_kinematics import WheelKinematics
 
 TWO_PI = 2.0 * math.pi
 
@@ -48,7 +51,8 @@ class WheelOdometry:
     q: np.ndarray = field(init=False)
     v: np.ndarray = field(init=False)
     updates: int = field(init=False, default=0)
-    _last_pos: np.ndarray | None = field(init=False, default=None)
+    kinematics: object = field(init=False, repr=False)   # WheelKinematics (closed form) or the model's solves
+    _last_pos: list | None = field(init=False, default=None)
     _last_time: float | None = field(init=False, default=None)
 
     def __post_init__(self) -> None:
@@ -56,41 +60,61 @@ class WheelOdometry:
             raise ValueError(f"odometry source must be 'position' or 'velocity', got {self.source!r}")
         self.q = np.asarray(self.q0, dtype=float).copy()
         self.v = np.zeros_like(self.q)
+        self.kinematics = WheelKinematics.for_model(self.model)
 
     def wheel_speeds(self, estimates) -> np.ndarray:
         """ω (rad/s) = 2π · vel (turns/s)."""
         return TWO_PI * np.array([e.vel_turns_s for e in estimates], dtype=float)
 
     def update(self, estimates) -> tuple[np.ndarray, np.ndarray]:
-        """Advance with the latest estimates; returns (q, q̇) (copies)."""
+        """Advance with the latest estimates; returns (q, q̇) (copies).
+
+        Works on Python floats (three components; `WheelKinematics`): at 500 Hz a handful of
+        numpy calls on 3-vectors cost more than the arithmetic."""
         if any(e is None for e in estimates):
             return self.q.copy(), self.v.copy()
-        pos = np.array([e.pos_turns for e in estimates], dtype=float)
+        pos = [e.pos_turns for e in estimates]
         newest = max(e.received for e in estimates)
-        v_new = self.model.body_velocity_from_wheels(self.q, self.wheel_speeds(estimates))
-        if self._last_pos is not None and np.max(np.abs(pos - self._last_pos)) > self.max_step_turns:
+        omega = [TWO_PI * e.vel_turns_s for e in estimates]
+        q = self.q.tolist()
+        v_new = self.kinematics.body_velocity(q, omega)
+        last = self._last_pos
+        if last is not None and any(abs(p - p0) > self.max_step_turns for p, p0 in zip(pos, last)):
             self.discontinuities += 1       # e.g. a drive restarted from 0 turns: re-baseline, keep the pose
-            self._last_pos = None
-        if self._last_pos is not None:
+            last = None
+        if last is not None:
             if self.source == "position":
-                self.q = self._integrate_angles(TWO_PI * (pos - self._last_pos))
+                q = self._integrate_angles(q, [TWO_PI * (p - p0) for p, p0 in zip(pos, last)])
             else:
                 dt = max(newest - self._last_time, 0.0)
-                self.q = self.q + 0.5 * dt * (self.v + v_new)
-            v_new = self.model.body_velocity_from_wheels(self.q, self.wheel_speeds(estimates))
+                q = [qi + 0.5 * dt * (vi + wi) for qi, vi, wi in zip(q, self.v.tolist(), v_new)]
+            v_new = self.kinematics.body_velocity(q, omega)
+            self.q = np.array(q)
         self._last_pos, self._last_time = pos, newest
-        self.v = v_new
+        self.v = np.array(v_new)
         self.updates += 1
         return self.q.copy(), self.v.copy()
 
-    def _integrate_angles(self, d_phi: np.ndarray) -> np.ndarray:
+    def _integrate_angles(self, q: list, d_phi: list) -> list:
         """Δq = B(ψ_mid)⁻ᵀ Δφ: one predictor pass for the yaw, then the midpoint."""
-        dq = self.model.body_velocity_from_wheels(self.q, d_phi)
-        mid = self.q + 0.5 * dq
-        dq = self.model.body_velocity_from_wheels(mid, d_phi)
-        return self.q + dq
+        dq = self.kinematics.body_velocity(q, d_phi)
+        mid = [qi + 0.5 * di for qi, di in zip(q, dq)]
+        dq = self.kinematics.body_velocity(mid, d_phi)
+        return [qi + di for qi, di in zip(q, dq)]
 
 
 def feedback_ages(estimates, now: float) -> np.ndarray:
     """Age (s) of each wheel's latest estimate; +inf for a wheel never heard from."""
     return np.array([math.inf if e is None else max(now - e.received, 0.0) for e in estimates], dtype=float)
+
+
+def oldest_feedback_age(estimates, now: float) -> float:
+    """The largest of `feedback_ages` (s), on Python floats; +inf if a wheel was never heard from."""
+    oldest = 0.0
+    for e in estimates:
+        if e is None:
+            return math.inf
+        age = now - e.received
+        if age > oldest:
+            oldest = age
+    return oldest

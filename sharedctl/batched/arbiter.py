@@ -12,7 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..sharing import Authority, LawRole, Mode, SharingParameters
-from .geometry import HAZARD, SAFE, GroupTable, Situation
+from .geometry import HAZARD, SAFE, GroupTable, Situation, group_row_values
 
 HUMAN, SHARED, MACHINE = int(Authority.HUMAN), int(Authority.SHARED), int(Authority.MACHINE)
 TRACKING, HAZARD_LAW = int(LawRole.TRACKING), int(LawRole.HAZARD)
@@ -93,8 +93,11 @@ def arbitrate(table: GroupTable, params: SharingParameters, state: ArbiterArrays
     # law role, with the law-level trigger: back to tracking when safe and clear of the faces
     old = state.group
     has_old = old >= 0
-    old_x = row_x[table.group_rows[np.where(has_old, old, 0)], arange[:, None]]   # (N, n)
-    clear = ~has_old | np.all(old_x <= -params.bands.b1, axis=1)
+    old_safe = np.where(has_old, old, 0)
+    clear = np.ones(N, bool)
+    for x in group_row_values(table, row_x, old_safe):        # the rows of the old group
+        clear &= x <= -params.bands.b1
+    clear |= ~has_old
     role = np.where(hazard, HAZARD_LAW, state.role)
     role = np.where((state.role == HAZARD_LAW) & safe & clear, TRACKING, role)
 
@@ -103,9 +106,8 @@ def arbitrate(table: GroupTable, params: SharingParameters, state: ArbiterArrays
         needs = np.ones(N, bool)
     else:
         needs = latched
-    old_safe = np.where(has_old, old, 0)
-    applies = situation.containing[table.region_of[old_safe], arange]
-    stale = ~has_old | (latched & ~before) | ~applies | (missed[old_safe, arange] > 0)
+    applies = situation.containing.take(table.region_of.take(old_safe) * N + arange)
+    stale = ~has_old | (latched & ~before) | ~applies | (missed.take(old_safe * N + arange) > 0)
     group = np.where(needs & stale & (chosen >= 0), chosen, old)
     group_changed = group != old
 

@@ -41,10 +41,15 @@ class GroupTable:
     region_rows: tuple         # per region: indices of its rows among the distinct rows
     region_sel: np.ndarray     # (R, P) 1 where the row belongs to the region
     members: tuple             # per region: its groups' indices
-    reach: np.ndarray          # (Q, n): k_j K_g⁻¹ for each group g and each row j of its region outside g
+    reach: np.ndarray          # (Q, P): k_j K_g⁻¹ for each group g and each row j of its region outside g,
+                               # spread over the distinct rows of g (k_j q_r = reach · (x_r − t) per row)
     reach_group: np.ndarray    # (Q,) the group g of each such pair
     reach_T: np.ndarray        # (Q, 1) t_j
     reach_sel: np.ndarray      # (G, Q) 1 where the pair belongs to the group
+    K_cols: np.ndarray         # (n, n, G) K with the group index last, for gathering one per robot
+    T_cols: np.ndarray         # (n, G)
+    K_inv_cols: np.ndarray     # (n, n, G)
+    group_rows_cols: np.ndarray  # (n, G) group_rows transposed
 
     @staticmethod
     def of(feasible: FeasibleSet) -> "GroupTable":
@@ -75,13 +80,17 @@ class GroupTable:
         # rows of its polytope outside the group are checked through k_j q_r = (k_j K_g⁻¹)(x_r − T_g)
         pairs = [(g, j) for g, grp in enumerate(feasible.groups)
                  for j in range(feasible.regions[grp.region].K.shape[0]) if j not in grp.rows]
-        reach = np.array([feasible.regions[feasible.groups[g].region].K[j] @ st.K_inv[g] for g, j in pairs]).reshape(-1, n)
+        reach = np.zeros((len(pairs), P))
+        for q, (g, j) in enumerate(pairs):
+            np.add.at(reach[q], group_rows[g], feasible.regions[feasible.groups[g].region].K[j] @ st.K_inv[g])
         reach_T = np.array([feasible.regions[feasible.groups[g].region].T[j] for g, j in pairs]).reshape(-1, 1)
         reach_group = np.array([g for g, _ in pairs], dtype=int)
         reach_sel = np.zeros((G, len(pairs)))
         reach_sel[reach_group, np.arange(len(pairs))] = 1.0
         return GroupTable(n, st.K, st.T, st.K_inv, row_K, row_T, group_rows, group_sel, missed_sel, region_of,
-                          tuple(region_rows), region_sel, tuple(members), reach, reach_group, reach_T, reach_sel)
+                          tuple(region_rows), region_sel, tuple(members), reach, reach_group, reach_T, reach_sel,
+                          np.ascontiguousarray(st.K.transpose(1, 2, 0)), np.ascontiguousarray(st.T.T),
+                          np.ascontiguousarray(st.K_inv.transpose(1, 2, 0)), np.ascontiguousarray(group_rows.T))
 
     @property
     def groups(self) -> int:
@@ -134,22 +143,35 @@ class AllGroups:
     rows: RowValues
     p: np.ndarray               # (G, n, N)
     value: np.ndarray           # (G, N) ½(|z|² + |p|²), +∞ where the group does not apply (x ≥ 0)
-    reference_offset: np.ndarray  # (G, n, N) x_r − T of each group: q_r = K⁻¹ (x_r − T)
 
 
-def all_groups(table: GroupTable, q, v, qd, qd_dot, shape: ReferenceShape, lam: float) -> AllGroups:
-    """(6), (7), (11) for every group and robot: the selection values and projected references."""
-    x = table.row_K @ q
-    x += table.row_T
+@dataclass(frozen=True)
+class RowReference:
+    """The reference terms of (7) per distinct row (P, N) — functions of the wish alone."""
+
+    x_r: np.ndarray
+    x_r_dot: np.ndarray
+    shifted: np.ndarray         # x_r − t
+
+
+def row_reference(table: GroupTable, qd, qd_dot, shape: ReferenceShape) -> RowReference:
+    """x_r = σ(k q_d + t), ẋ_r = σ'(k q_d + t) k q̇_d of (7) for every distinct row."""
     m = table.row_K @ qd
     m += table.row_T
     x_r, d1 = saturate(m, shape, second=False)
     x_r_dot = table.row_K @ qd_dot
     x_r_dot *= d1
-    z = np.divide(x, x_r)
+    return RowReference(x_r, x_r_dot, x_r - table.row_T)
+
+
+def all_groups(table: GroupTable, q, v, ref: RowReference, lam: float) -> AllGroups:
+    """(6), (11) for every group and robot: the selection values ½(|z|² + |p|²)."""
+    x = table.row_K @ q
+    x += table.row_T
+    z = np.divide(x, ref.x_r)
     np.log(z, out=z)
     w = np.exp(z)
-    w *= x_r_dot
+    w *= ref.x_r_dot
     w += (1.0 + lam) * z
     v_ref = np.matmul(table.K_inv, w[table.group_rows])
     p = np.subtract(v[None], v_ref, out=v_ref)
@@ -157,28 +179,41 @@ def all_groups(table: GroupTable, q, v, qd, qd_dot, shape: ReferenceShape, lam: 
     # z is NaN on rows with x ≥ 0; those rows make their groups inapplicable (+∞) and must not
     # reach the other groups' sums through the selection product (0 · NaN = NaN)
     value = table.group_sel @ np.where(outside_rows, 0.0, z * z)
-    value += np.sum(p * p, axis=1)
+    value += np.einsum("gim,gim->gm", p, p)     # |p|² per group, without a (G, n, N) temporary
     value *= 0.5
     value[((table.group_sel @ outside_rows) > 0.0) | np.isnan(value)] = np.inf
-    x_r -= table.row_T
-    return AllGroups(RowValues(x, table.row_K @ v, z, x_r), p, value, x_r[table.group_rows])
+    return AllGroups(RowValues(x, table.row_K @ v, z, ref.shifted), p, value)
 
 
-def reference_inside(table: GroupTable, offsets: np.ndarray) -> np.ndarray:
-    """(G, N): is group g's projected reference inside g's whole polytope (FeasibleSet.reference_inside)?"""
+def reference_inside(table: GroupTable, shifted_reference: np.ndarray) -> np.ndarray:
+    """(G, N): is group g's projected reference inside g's whole polytope (FeasibleSet.reference_inside)?
+
+    `shifted_reference` (P, N) is x_r − t per distinct row; k_j q_r + t_j of every (group, row outside
+    it) pair is one product with `reach`."""
     if table.reach_group.size == 0:
-        return np.ones(offsets.shape[::2], dtype=bool)
-    values = np.einsum("qi,qim->qm", table.reach, offsets[table.reach_group])
+        return np.ones((table.groups, shifted_reference.shape[1]), dtype=bool)
+    values = table.reach @ shifted_reference
     values += table.reach_T
     return (table.reach_sel @ ~(values <= 0.0)) == 0.0
 
 
-def projected_configuration(table: GroupTable, offsets: np.ndarray, group: np.ndarray) -> np.ndarray:
-    """q_r = K⁻¹(x_r − T) of each robot's `group` (n, N); NaN where the group is −1."""
+def group_row_values(table: GroupTable, row_values: np.ndarray, group: np.ndarray) -> np.ndarray:
+    """(n, N): the values (P, N) of each robot's `group` rows (`group` ≥ 0), one flat gather."""
     N = group.size
+    index = table.group_rows_cols.take(group, axis=1)
+    index *= N
+    index += np.arange(N)
+    return row_values.take(index)
+
+
+def projected_configuration(table: GroupTable, shifted_reference: np.ndarray, group: np.ndarray) -> np.ndarray:
+    """q_r = K⁻¹(x_r − T) of each robot's `group` (n, N); NaN where the group is −1."""
     g = np.maximum(group, 0)
-    q_r = np.einsum("mij,jm->im", table.K_inv[g], offsets[g, :, np.arange(N)].T)
-    q_r[:, group < 0] = np.nan
+    offsets = group_row_values(table, shifted_reference, g)
+    q_r = np.einsum("ijm,jm->im", table.K_inv_cols.take(g, axis=-1), offsets)
+    none = group < 0
+    if none.any():
+        q_r[:, none] = np.nan
     return q_r
 
 
@@ -209,7 +244,9 @@ def classify(table: GroupTable, rows: RowValues, bands: Bands) -> Situation:
     any_hazard = (table.region_sel @ hazard) > 0.0
     any_unsafe = (table.region_sel @ unsafe) > 0.0
     region_class = np.where(any_hazard, HAZARD, np.where(any_unsafe, HYSTERESIS, SAFE))
-    margin = np.max([-np.max(x[r], axis=0) for r in table.region_rows], axis=0)
+    margin = -np.max(x[table.region_rows[0]], axis=0)
+    for r in table.region_rows[1:]:
+        np.maximum(margin, -np.max(x[r], axis=0), out=margin)
     any_safe = np.any(containing & (region_class == SAFE), axis=0)
     all_hazard = np.all(~containing | (region_class == HAZARD), axis=0)
     none = ~containing.any(axis=0)

@@ -32,6 +32,21 @@ def rmatvec(A: np.ndarray, x: np.ndarray) -> np.ndarray:
     return np.einsum("ijm,im->jm", A, x)
 
 
+def gather(a: np.ndarray, cols) -> np.ndarray:
+    """a[..., cols] for an index array (`np.take`, several times faster than fancy indexing on
+    a 2-D array); `a` itself when `cols` is None (every robot)."""
+    return a if cols is None else a.take(cols, axis=-1)
+
+
+def scatter(dst: np.ndarray, cols, src: np.ndarray) -> None:
+    """dst[:, cols] = src, one row at a time (a 1-D assignment is several times faster)."""
+    if cols is None:
+        dst[...] = src
+        return
+    for i in range(dst.shape[0]):
+        dst[i][cols] = src[i]
+
+
 @dataclass(frozen=True)
 class GroupFrame:
     """The active group of each robot: K, T, K⁻¹ (n, n, M) / (n, M)."""
@@ -40,29 +55,42 @@ class GroupFrame:
     T: np.ndarray
     K_inv: np.ndarray
 
+    @staticmethod
+    def of(K_cols: np.ndarray, T_cols: np.ndarray, K_inv_cols: np.ndarray, group: np.ndarray) -> "GroupFrame":
+        """Each robot's group matrices gathered from the tables (…, G) by its group index (M,)."""
+        return GroupFrame(K_cols.take(group, axis=-1), T_cols.take(group, axis=-1), K_inv_cols.take(group, axis=-1))
+
     def take(self, index) -> "GroupFrame":
         return GroupFrame(self.K[..., index], self.T[..., index], self.K_inv[..., index])
 
 
 @dataclass(frozen=True)
 class Reference:
-    """(x_r, ẋ_r, ẍ_r) of (7) for each robot's group at one instant (depends on the wish only)."""
+    """(x_r, ẋ_r, ẍ_r) of (7) for each robot's group at one instant (depends on the wish only),
+    and ẋ_r/x_r (the reference's part of ż, (9))."""
 
     x_r: np.ndarray
     x_r_dot: np.ndarray
     x_r_ddot: np.ndarray
+    rate: np.ndarray
 
     def take(self, index) -> "Reference":
-        return Reference(self.x_r[:, index], self.x_r_dot[:, index], self.x_r_ddot[:, index])
+        return Reference(self.x_r[:, index], self.x_r_dot[:, index], self.x_r_ddot[:, index], self.rate[:, index])
 
 
 def projected_reference(frame: GroupFrame, qd, qd_dot, qd_ddot, shape) -> Reference:
     """reference.projected_reference for each robot's group."""
-    m = matvec(frame.K, qd) + frame.T
+    m = matvec(frame.K, qd)
+    m += frame.T
     m_dot = matvec(frame.K, qd_dot)
     m_ddot = matvec(frame.K, qd_ddot)
     x_r, d1, d2 = saturate(m, shape)
-    return Reference(x_r, d1 * m_dot, d2 * m_dot**2 + d1 * m_ddot)
+    # ẍ_r = σ'' ṁ² + σ' m̈, ẋ_r = σ' ṁ
+    m_ddot *= d1
+    d2 *= np.square(m_dot)
+    d2 += m_ddot
+    m_dot *= d1
+    return Reference(x_r, m_dot, d2, np.divide(m_dot, x_r))
 
 
 @dataclass(frozen=True)
@@ -75,22 +103,39 @@ class Coordinates:
 
     @property
     def inside(self) -> np.ndarray:
-        return np.all(self.x < 0.0, axis=0)
+        """x < 0 on every row of the group (False where x is NaN)."""
+        x = self.x
+        inside = x[0] < 0.0
+        for row in x[1:]:
+            inside &= row < 0.0
+        return inside
 
 
 def coordinates(frame: GroupFrame, q: np.ndarray, ref: Reference) -> Coordinates:
-    x = matvec(frame.K, q) + frame.T
-    return Coordinates(x, np.log(x / ref.x_r), ref)
+    x = matvec(frame.K, q)
+    x += frame.T
+    z = np.divide(x, ref.x_r)
+    return Coordinates(x, np.log(z, out=z), ref)
 
 
 def _error_signals(frame: GroupFrame, c: Coordinates, v, lam):
-    """(p, v_ref, v̇_ref) of transform.py: v_ref = K⁻¹[(1+λ)z + e^z ẋ_r], p = v − v_ref."""
+    """(p, v_ref, v̇_ref) of transform.py: v_ref = K⁻¹[(1+λ)z + e^z ẋ_r], p = v − v_ref,
+    v̇_ref = K⁻¹[(1+λ)ż + e^z ż ẋ_r + e^z ẍ_r], ż = K v / x − ẋ_r/x_r (in-place, the same order)."""
     r = c.ref
-    zd = matvec(frame.K, v) / c.x - r.x_r_dot / r.x_r
+    zd = matvec(frame.K, v)
+    zd /= c.x
+    zd -= r.rate
     ez = np.exp(c.z)
-    v_ref = matvec(frame.K_inv, (1.0 + lam) * c.z + ez * r.x_r_dot)
-    a_ref = matvec(frame.K_inv, (1.0 + lam) * zd + ez * zd * r.x_r_dot + ez * r.x_r_ddot)
-    return v - v_ref, v_ref, a_ref
+    w = np.multiply(ez, r.x_r_dot)
+    w += (1.0 + lam) * c.z
+    v_ref = matvec(frame.K_inv, w)
+    np.multiply(ez, zd, out=w)
+    w *= r.x_r_dot
+    w += (1.0 + lam) * zd
+    ez *= r.x_r_ddot
+    w += ez
+    a_ref = matvec(frame.K_inv, w)
+    return np.subtract(v, v_ref, out=w), v_ref, a_ref
 
 
 class CertaintyEquivalent:
@@ -102,6 +147,7 @@ class CertaintyEquivalent:
     def __init__(self, law: CertaintyEquivalentLaw, n: int):
         self.lam = law.lam
         self.kp = diag_gain(law.Kp, n)[:, None]
+        self.minus_kp = -self.kp
         self.gamma = law.gamma_theta
 
     def initial_state(self, z, p):
@@ -109,8 +155,11 @@ class CertaintyEquivalent:
 
     def evaluate(self, frame, c, v, theta_hat, state):
         p, v_ref, a_ref = _error_signals(frame, c, v, self.lam)
-        u = -self.kp * p - rmatvec(frame.K, c.z / c.x) + plant.regressor_times(v, v_ref, a_ref, theta_hat)
-        theta_dot = -plant.regressor_transpose_times(v, v_ref, a_ref, p) / self.gamma
+        u = np.multiply(self.minus_kp, p)
+        u -= rmatvec(frame.K, np.divide(c.z, c.x))
+        u += plant.regressor_times(v, v_ref, a_ref, theta_hat)
+        theta_dot = plant.regressor_transpose_times(v, v_ref, a_ref, p)
+        theta_dot /= -self.gamma
         return u, theta_dot, None
 
     def estimate(self, theta_hat, state):
@@ -184,7 +233,7 @@ class OutputFeedback:
         inner = -self.k1 * np.tanh((z + z_f) / self.width) + k * r_f - z
         u = rmatvec(frame.K, self.stiffness * inner / c.x) + plant.regressor_times(w, w, w0_dot, theta_hat)
         rate = np.concatenate([-z_f + r_f, -r_f - k * (z + r_f) + z - z_f])
-        zd_hat = matvec(frame.K, v_hat) / c.x - r.x_r_dot / r.x_r
+        zd_hat = matvec(frame.K, v_hat) / c.x - r.rate
         eta_hat = zd_hat + z + r_f
         N_eta = matvec(frame.K_inv, c.x * eta_hat)
         theta_dot = -plant.regressor_transpose_times(w, w, w0_dot, N_eta) / self.gamma

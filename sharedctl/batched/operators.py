@@ -17,6 +17,7 @@ with a `TypeError`: a callable per robot per RK stage is exactly what a batch mu
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 from typing import Sequence
 
 import numpy as np
@@ -56,7 +57,7 @@ class OperatorBatch:
         (n, N), deflection (N,); each wish is the point `target`, as the scenario files build it."""
         n, N = target.shape
         zeros, none = np.zeros((n, N)), np.zeros(N, bool)
-        return OperatorBatch(np.broadcast_to(kp, (n, N)).astype(float), zeros, np.ones(N, bool), target.astype(float),
+        return OperatorBatch(np.ascontiguousarray(np.broadcast_to(kp, (n, N)), dtype=float), zeros, np.ones(N, bool), target.astype(float),
                              np.broadcast_to(deflection, (N,)).astype(float), none, target.astype(float), zeros,
                              np.zeros((2, N)), np.zeros(N), np.zeros(N), np.zeros(N))
 
@@ -66,11 +67,32 @@ class OperatorBatch:
 
     def take(self, index) -> "OperatorBatch":
         """The operators of robots `index` (an index array or slice over the batch)."""
-        return OperatorBatch(**{name: getattr(self, name)[..., index] for name in self.__dataclass_fields__})
+        return OperatorBatch(**{name: np.ascontiguousarray(getattr(self, name)[..., index]) for name in self.__dataclass_fields__})
 
     # ----- the wish ------------------------------------------------------------
+    @cached_property
+    def _point(self) -> DesiredBatch | None:
+        """The wish when every robot's is a point (a line of velocity 0, as an adversary's): then
+        q_d(t) = start, q̇_d = q̈_d = 0 at every t, one object (the step computes its projected
+        reference once for the three RK stage times)."""
+        if self.circle.any() or np.any(self.line_velocity != 0.0):
+            return None
+        zeros = np.zeros(self.kp.shape)
+        return DesiredBatch(self.line_start + zeros, zeros, zeros)
+
+    @cached_property
+    def _adversaries(self) -> tuple[bool, bool]:
+        """(any, all) robots driven by an adversary."""
+        return bool(self.adversarial.any()), bool(self.adversarial.all())
+
+    @cached_property
+    def _minus_deflection(self) -> np.ndarray:
+        return -self.deflection
+
     def desired(self, t: float) -> DesiredBatch:
         """q_d(t), q̇_d(t), q̈_d(t) for every robot (human.py's Trajectory.sample, vectorised)."""
+        if self._point is not None:
+            return self._point
         n, N = self.kp.shape
         any_circle = bool(self.circle.any())
         all_circle = any_circle and bool(self.circle.all())
@@ -98,13 +120,14 @@ class OperatorBatch:
     # ----- the handle ----------------------------------------------------------
     def deflection_of(self, desired: DesiredBatch, q: np.ndarray, v: np.ndarray) -> np.ndarray:
         """q̂_h for every robot."""
-        any_adv = bool(self.adversarial.any())
-        all_adv = any_adv and bool(self.adversarial.all())
+        any_adv, all_adv = self._adversaries
         if not all_adv:
             tracking = (desired.q - q) + self.damping_ratio * (desired.q_dot - v)
             if not any_adv:
                 return tracking
-        pushing = np.minimum(np.maximum(self.target - q, -self.deflection), self.deflection)   # np.clip, faster
+        pushing = np.subtract(self.target, q)
+        np.maximum(pushing, self._minus_deflection, out=pushing)      # np.clip, faster
+        np.minimum(pushing, self.deflection, out=pushing)
         return pushing if all_adv else np.where(self.adversarial, pushing, tracking)
 
     def command(self, desired: DesiredBatch, q: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

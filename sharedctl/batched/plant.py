@@ -35,19 +35,35 @@ def acceleration(theta: np.ndarray, v: np.ndarray, u: np.ndarray, out: np.ndarra
 
 
 def regressor_times(v, w, a, theta) -> np.ndarray:
-    """Y(q, v, w, a) θ for every robot."""
+    """Y(q, v, w, a) θ for every robot: [a₀θ₀ + ψ̇w₁θ₂, a₁θ₀ − ψ̇w₀θ₂, a₂θ₁]."""
     psi = v[2]
-    return np.stack((a[0] * theta[0] + (psi * w[1]) * theta[2],
-                     a[1] * theta[0] + (-psi * w[0]) * theta[2],
-                     a[2] * theta[1]))
+    out = np.empty(a.shape)
+    t = np.multiply(psi, w[1])
+    t *= theta[2]
+    np.multiply(a[0], theta[0], out=out[0])
+    out[0] += t
+    np.multiply(psi, w[0], out=t)
+    t *= theta[2]
+    np.multiply(a[1], theta[0], out=out[1])
+    out[1] -= t
+    np.multiply(a[2], theta[1], out=out[2])
+    return out
 
 
 def regressor_transpose_times(v, w, a, p) -> np.ndarray:
-    """Y(q, v, w, a)ᵀ p for every robot."""
+    """Y(q, v, w, a)ᵀ p for every robot: [a₀p₀ + a₁p₁, a₂p₂, ψ̇w₁p₀ − ψ̇w₀p₁]."""
     psi = v[2]
-    return np.stack((a[0] * p[0] + a[1] * p[1],
-                     a[2] * p[2],
-                     (psi * w[1]) * p[0] + (-psi * w[0]) * p[1]))
+    out = np.empty(a.shape)
+    t = np.multiply(a[1], p[1])
+    np.multiply(a[0], p[0], out=out[0])
+    out[0] += t
+    np.multiply(a[2], p[2], out=out[1])
+    np.multiply(psi, w[1], out=out[2])
+    out[2] *= p[0]
+    np.multiply(psi, w[0], out=t)
+    t *= p[1]
+    out[2] -= t
+    return out
 
 
 def nce_regressor(v, p, v_ref, a_ref, k_q: float) -> np.ndarray:
@@ -64,9 +80,12 @@ def nce_regressor(v, p, v_ref, a_ref, k_q: float) -> np.ndarray:
 
 def project(theta_hat: np.ndarray) -> np.ndarray:
     """The omni robot's parameter box (EulerLagrangeModel.project)."""
-    lower = np.asarray(OmniRobot.theta_lower, float)[:, None]
-    upper = np.asarray(OmniRobot.theta_upper, float)[:, None]
-    return np.clip(theta_hat, lower, upper)
+    out = np.maximum(theta_hat, _LOWER)       # np.clip's result, without its overhead
+    return np.minimum(out, _UPPER, out=out)
+
+
+_LOWER = np.asarray(OmniRobot.theta_lower, float)[:, None]
+_UPPER = np.asarray(OmniRobot.theta_upper, float)[:, None]
 
 
 def wheel_torques(q: np.ndarray, u: np.ndarray, model: OmniRobot) -> np.ndarray:

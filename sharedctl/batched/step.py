@@ -18,8 +18,8 @@ import numpy as np
 
 from ..sharing import Mode
 from .arbiter import HUMAN, MACHINE, arbitrate
-from .geometry import all_groups, classify, missed_rows, projected_configuration, reference_inside, select_group
-from .laws import GroupFrame, coordinates, projected_reference
+from .geometry import all_groups, classify, missed_rows, projected_configuration, reference_inside, row_reference, select_group
+from .laws import GroupFrame, coordinates, gather, projected_reference, scatter
 from .plant import acceleration, project
 from .results import Rows
 
@@ -29,6 +29,18 @@ class StepKernel:
 
     def __init__(self, engine):
         self.e = engine
+        self._reference = (None, None, None)
+
+    def reference(self, wish):
+        """(RowReference, reference_inside) of `wish`; a wish that is the same object as the last
+        step's (a point wish, operators.py) keeps its values."""
+        last, row_ref, ref_ok = self._reference
+        if wish is not last:
+            table = self.e.table
+            row_ref = row_reference(table, wish.q, wish.q_dot, self.e.shape)
+            ref_ok = reference_inside(table, row_ref.shifted)
+            self._reference = (wish, row_ref, ref_ok)
+        return row_ref, ref_ok
 
     def step(self, fleet, k: int, steps: int, recording):
         """Advance `fleet` by one step; returns (stopping columns, their Trace.finite) or None."""
@@ -46,8 +58,8 @@ class StepKernel:
             u_h0, intent = np.zeros_like(q), np.zeros(N)
         else:
             u_h0, intent = ops.command(wish, q, v)
-        groups = all_groups(table, q, v_meas, wish.q, wish.q_dot, e.shape, e.lam)
-        ref_ok = reference_inside(table, groups.reference_offset)
+        row_ref, ref_ok = self.reference(wish)
+        groups = all_groups(table, q, v_meas, row_ref, e.lam)
         situation = classify(table, groups.rows, e.sharing.bands)
         missed = missed_rows(table, situation)
         chosen = select_group(table, situation, groups.value, missed, ref_ok)
@@ -81,7 +93,7 @@ class StepKernel:
         plan = self.plan(engaged, dec, wishes)
         machine = dec.authority == MACHINE
         escaped = np.zeros(N, bool)
-        d1, u_h, u_f, u_s = self.rates(fleet, Y, wish, plan, 0, dec, machine, escaped, u_h0)
+        d1, u_h, u_f, u_s = self.rates(fleet, Y, wish, plan, 0, dec, machine, escaped, u_h0, record=True)
         stage1 = escaped.copy()
         rows = self.rows(t, fleet, Y, v_meas, wish, groups, chosen, engaged, dec, situation, intent,
                          (u_h, u_f, u_s), stage1)
@@ -112,8 +124,10 @@ class StepKernel:
         nxt += Y
         projecting = (fleet.law_role >= 0) & e.projects[fleet.law_role]
         if projecting.any():
+            cols = np.flatnonzero(projecting)
+            sel = None if cols.size == N else cols
             th = nxt[L.theta]
-            th[:, projecting] = project(th[:, projecting])
+            scatter(th, sel, project(gather(th, sel)))
         finite = np.isfinite(nxt).all(axis=0)
         going = ~escaped & finite
         fleet.Y = nxt
@@ -134,26 +148,34 @@ class StepKernel:
 
     # ------------------------------------------------------------------------------
     def plan(self, engaged, dec, wishes):
-        """Per distinct law: its robots, their group frames and the projected reference at the
-        three stage times t, t + dt/2, t + dt (the reference depends on the wish only)."""
+        """Per distinct law: its robots (None for every robot of the chunk), their group frames
+        and the projected reference at the three stage times t, t + dt/2, t + dt (the reference
+        depends on the wish only; identical wishes share one)."""
         e = self.e
         cols_all = np.flatnonzero(engaged)
         if cols_all.size == 0:
             return []
+        N = engaged.size
         entries = []
         roles = dec.role[cols_all]
         for index, law in enumerate(e.distinct):
             cols = cols_all[e.runs(index, roles)]
             if cols.size == 0:
                 continue
-            g = dec.group[cols]
-            frame = GroupFrame(e.K_cols[..., g], e.T_cols[:, g], e.K_inv_cols[..., g])
-            refs = [projected_reference(frame, w.q[:, cols], w.q_dot[:, cols], w.q_ddot[:, cols], e.shape) for w in wishes]
-            entries.append((law, cols, frame, refs))
+            sel = None if cols.size == N else cols
+            frame = GroupFrame.of(e.table.K_cols, e.table.T_cols, e.table.K_inv_cols, dec.group[cols])
+            refs = []
+            for i, w in enumerate(wishes):
+                same = next((refs[j] for j in range(i) if wishes[j] is w), None)
+                if same is None:
+                    same = projected_reference(frame, gather(w.q, sel), gather(w.q_dot, sel), gather(w.q_ddot, sel), e.shape)
+                refs.append(same)
+            entries.append((law, cols, sel, frame, refs))
         return entries
 
-    def rates(self, fleet, Y, wish, plan, stage_time, dec, machine, escaped, u_h=None):
-        """The closed loop's rate at one RK stage (simulator.simulate's `rates`); also u_h, u_f, u_s."""
+    def rates(self, fleet, Y, wish, plan, stage_time, dec, machine, escaped, u_h=None, record=False):
+        """The closed loop's rate at one RK stage (simulator.simulate's `rates`); with `record`,
+        also u_h, u_f and u_s."""
         e = self.e
         L, n = e.layout, e.n
         q, v, theta_hat, law_state = Y[L.q], Y[L.v], Y[L.theta], Y[L.law_state]
@@ -166,23 +188,29 @@ class StepKernel:
         v_meas = e.observer.velocity(q, obs) if e.observer else v
         if u_h is None:
             u_h = np.zeros((n, N)) if e.mode is Mode.MACHINE else fleet.operators.force(wish, q, v)
-        u_f = np.zeros((n, N))
-        for law, cols, frame, refs in plan:
-            c = coordinates(frame, q[:, cols], refs[stage_time])
-            escaped[cols] |= ~c.inside
+        # (46)/(47): u_s = w_h u_h + w_f u_f, u_f = 0 where no law is engaged
+        u_s = np.multiply(dec.human_weight, u_h)
+        u_f = np.zeros((n, N)) if record else None
+        for law, cols, sel, frame, refs in plan:
+            c = coordinates(frame, gather(q, sel), refs[stage_time])
+            if sel is None:
+                escaped |= ~c.inside
+            else:
+                escaped[cols] |= ~c.inside
             size = law.state_size
-            u, theta_dot, rate = law.evaluate(frame, c, v_meas[:, cols], theta_hat[:, cols], law_state[:size, cols])
-            u_f[:, cols] = u
+            u, theta_dot, rate = law.evaluate(frame, c, gather(v_meas, sel), gather(theta_hat, sel), gather(law_state[:size], sel))
+            if record:
+                scatter(u_f, sel, u)
+            u *= gather(dec.machine_weight, sel)
+            u += gather(u_s, sel)
+            scatter(u_s, sel, u)
             if size:
-                out[L.law_state.start: L.law_state.start + size, cols] = rate
-            mach = machine[cols]
+                scatter(out[L.law_state.start: L.law_state.start + size], sel, rate)
+            mach = gather(machine, sel)
             if mach.all():
-                out[L.theta, cols] = theta_dot
+                scatter(out[L.theta], sel, theta_dot)
             elif mach.any():
-                out[L.theta, cols[mach]] = theta_dot[:, mach]
-        # (46)/(47): u_h (k_s = 1), u_f (hazardous), k_h u_h + k_f u_f (held k_s = 0)
-        u_s = dec.human_weight * u_h
-        u_s += dec.machine_weight * u_f
+                scatter(out[L.theta], sel, np.where(mach, theta_dot, 0.0))
         acceleration(fleet.theta, v, u_s, out[L.v])
         if e.observer:
             e.observer.derivative(q, obs, out[L.obs])
@@ -204,7 +232,7 @@ class StepKernel:
         L = self.e.layout
         u_h, u_f, u_s = signals
         ref_group = np.where(engaged, dec.group, chosen)
-        q_r = projected_configuration(self.e.table, groups.reference_offset, ref_group)
+        q_r = projected_configuration(self.e.table, groups.rows.shifted_reference, ref_group)
         estimate = self.estimate(fleet, Y[L.theta], Y[L.law_state])
         extra = {"v_hat": v_meas, "q_d": wish.q, "u_h": u_h, "u_f": u_f, "set_class": dec.overall, "group": dec.group,
                  "role": dec.role, "k_h": dec.k_h, "k_f": dec.k_f, "intent": intent}
@@ -238,5 +266,7 @@ class StepKernel:
 
 def _note(first_escape, escaped, stage1, Ys):
     """Remember the stage state at which each robot first escaped (after the first stage)."""
+    if np.count_nonzero(escaped) == len(first_escape) + np.count_nonzero(stage1):
+        return                                  # no new escape (the usual case)
     for c in np.flatnonzero(escaped & ~stage1):
         first_escape.setdefault(int(c), Ys[:, c].copy())

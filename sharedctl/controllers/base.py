@@ -2,7 +2,7 @@
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
-from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
@@ -11,9 +11,8 @@ from ..models import EulerLagrangeModel
 from ..transform import GroupCoordinates
 
 
-@dataclass(frozen=True)
-class LawOutput:
-    """u_f (generalised force), θ̂̇ (the shared estimate's rate) and the law's own state rate."""
+class LawOutput(NamedTuple):
+    """u_f (generalised force), θ̂̇ (the shared estimate's rate) and the law's own state rate (a named tuple)."""
 
     u: np.ndarray
     theta_dot: np.ndarray
@@ -65,6 +64,18 @@ def cached_gain(owner, name: str, n: int) -> np.ndarray:
     vector.flags.writeable = False
     cache[(name, n)] = (snapshot, vector)
     return vector
+
+
+def cached_gain_floats(owner, name: str, n: int) -> tuple[float, ...]:
+    """cached_gain as a tuple of Python floats (for laws computing on floats)."""
+    vector = cached_gain(owner, name, n)
+    cache = owner.__dict__.setdefault("_gain_floats_cache", {})
+    hit = cache.get((name, n))
+    if hit is not None and hit[0] is vector:
+        return hit[1]
+    values = tuple(vector.tolist())
+    cache[(name, n)] = (vector, values)
+    return values
 
 
 def diag_gain(value, n: int) -> np.ndarray:

@@ -16,8 +16,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..transform import reference_velocity_acceleration, z_dot
-from .base import LawOutput, MachineLaw, cached_gain, diag_gain
+from ..short_vectors import dot, floats, matvec
+from ..transform import reference_signals
+from .base import LawOutput, MachineLaw, cached_gain_floats, diag_gain
 
 
 @dataclass
@@ -37,17 +38,19 @@ class CertaintyEquivalentLaw(MachineLaw):
 
     def error_signals(self, model, group, c, q, v):
         """(p, ż, v_ref, v̇_ref) at one instant."""
-        zd = z_dot(c, group.K @ v)
-        v_ref, a_ref = reference_velocity_acceleration(group, c, zd, self.lam)
-        return v - v_ref, zd, v_ref, a_ref
+        f = group.floats
+        return tuple(map(np.array, reference_signals(c.floats, f.K, f.K_inv, floats(v), self.lam)))
 
     def evaluate(self, model, group, c, q, v, theta_hat, state) -> LawOutput:
-        p, _, v_ref, a_ref = self.error_signals(model, group, c, q, v)
-        Y = model.regressor(q, v, v_ref, a_ref)
-        kp = cached_gain(self, "Kp", model.n)
-        u = -kp * p - group.K.T @ (c.z / c.x) + Y @ theta_hat
-        theta_dot = -(Y.T @ p) / self.gamma_theta
-        return LawOutput(u, theta_dot, np.zeros(0))
+        """(12) on Python floats (short_vectors); numpy arrays in and out."""
+        f, cf, v = group.floats, c.floats, floats(v)
+        p, _, v_ref, a_ref = reference_signals(cf, f.K, f.K_inv, v, self.lam)
+        Y = model.regressor_rows(floats(q), v, v_ref, a_ref)
+        kp, theta = cached_gain_floats(self, "Kp", model.n), floats(theta_hat)
+        barrier = matvec(f.K_transposed, [zj / xj for zj, xj in zip(cf.z, cf.x)])     # Kᵀ Z1 z
+        u = [-kj * pj - bj + dot(row, theta) for kj, pj, bj, row in zip(kp, p, barrier, Y)]
+        theta_dot = [-dot(column, p) / self.gamma_theta for column in zip(*Y)]         # −Yᵀ p / γ_θ
+        return LawOutput(np.array(u), np.array(theta_dot), _NO_STATE)
 
     def lyapunov(self, model, group, c, q, v, theta_hat) -> float:
         """L of Theorem 1 with the true θ (for analysis and tests only: the law never sees θ)."""
@@ -60,3 +63,7 @@ class CertaintyEquivalentLaw(MachineLaw):
         p, *_ = self.error_signals(model, group, c, q, v)
         kp = diag_gain(self.Kp, model.n)
         return float((self.lam + 1.0) * np.sum(c.z**2 / c.x) - p @ (kp * p))
+
+
+_NO_STATE = np.zeros(0)
+_NO_STATE.flags.writeable = False

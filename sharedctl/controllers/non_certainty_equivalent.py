@@ -22,7 +22,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..transform import reference_velocity_acceleration, z_dot
+from ..short_vectors import dot, floats
+from ..transform import reference_signals
 from .base import LawOutput, MachineLaw
 
 
@@ -46,14 +47,10 @@ class NonCertaintyEquivalentLaw(MachineLaw):
     def state_size(self, model) -> int:
         return model.n + model.n * model.n_theta
 
-    def _split(self, model, state):
-        n, k = model.n, model.n_theta
-        return state[:n], state[n:].reshape(n, k)
-
     def _p(self, group, c, v):
-        zd = z_dot(c, group.K @ v)
-        v_ref, a_ref = reference_velocity_acceleration(group, c, zd, self.lam)
-        return v - v_ref, v_ref, a_ref
+        f = group.floats
+        p, _, v_ref, a_ref = reference_signals(c.floats, f.K, f.K_inv, floats(v), self.lam)
+        return np.array(p), np.array(v_ref), np.array(a_ref)
 
     def initial_state(self, model, group, c, q, v, theta_hat) -> np.ndarray:
         p, _, _ = self._p(group, c, v)
@@ -71,23 +68,36 @@ class NonCertaintyEquivalentLaw(MachineLaw):
         )
 
     def evaluate(self, model, group, c, q, v, theta_hat, state) -> LawOutput:
-        p_n, W_n = self._split(model, state)
-        p, v_ref, a_ref = self._p(group, c, v)
-        W = self.regressor_w(model, q, v, p, p_n, v_ref, a_ref)
-        s = p + (self.k_q - self.alpha_n) * p_n
-        g = self.gamma_n
-        beta = g * (W_n.T @ p_n)
-        u = -W @ (theta_hat + beta) - g * (W_n @ (W_n.T @ s))
-        theta_dot = g * ((self.alpha_n * W_n - W).T @ p_n) + g * self.k_q * (W_n.T @ p_n)
-        p_n_dot = -self.alpha_n * p_n + p
-        W_n_dot = -self.alpha_n * W_n + W
-        return LawOutput(u, theta_dot, np.concatenate([p_n_dot, W_n_dot.ravel()]))
+        """(13)–(14) on Python floats (short_vectors); numpy arrays in and out. W, W_n by rows."""
+        n, f, v = model.n, group.floats, floats(v)
+        p_n, W_n = self._split_floats(n, len(theta_hat), floats(state))
+        p, _, v_ref, a_ref = reference_signals(c.floats, f.K, f.K_inv, v, self.lam)
+        kq, alpha, g = self.k_q, self.alpha_n, self.gamma_n
+        s = [pj + (kq - alpha) * pnj for pj, pnj in zip(p, p_n)]
+        q = floats(q)
+        W = [[mr + kq * m - cr - y for mr, m, cr, y in zip(*rows)] for rows in zip(       # W of (14)
+            model.mass_rate_regressor_rows(q, v, s), model.mass_regressor_rows(q, p),
+            model.coriolis_regressor_rows(q, v, p), model.regressor_rows(q, v, v_ref, a_ref))]
+        W_n_columns = list(zip(*W_n))
+        wp = [dot(column, p_n) for column in W_n_columns]                                 # W_nᵀ p_n
+        estimate = [th + g * b for th, b in zip(floats(theta_hat), wp)]                    # θ̂ + β
+        ws = [dot(column, s) for column in W_n_columns]                                   # W_nᵀ s
+        u = [-dot(w, estimate) - g * dot(wn, ws) for w, wn in zip(W, W_n)]
+        theta_dot = [g * dot([alpha * a - b for a, b in zip(cn, cw)], p_n) + g * kq * wpj
+                     for cn, cw, wpj in zip(W_n_columns, zip(*W), wp)]
+        p_n_dot = [-alpha * pnj + pj for pnj, pj in zip(p_n, p)]
+        W_n_dot = [-alpha * a + b for wn, w in zip(W_n, W) for a, b in zip(wn, w)]
+        return LawOutput(np.array(u), np.array(theta_dot), np.array(p_n_dot + W_n_dot))
+
+    @staticmethod
+    def _split_floats(n: int, n_theta: int, state: list) -> tuple[list, list]:
+        """(p_n, rows of W_n) from the law's state as floats."""
+        return state[:n], [state[n + i * n_theta:n + (i + 1) * n_theta] for i in range(n)]
 
     def estimate(self, theta_hat, state):
         """θ̂ + β, β = γ_n W_nᵀ p_n."""
         return theta_hat + self._beta(theta_hat.size, state)
 
     def _beta(self, n_theta: int, state: np.ndarray) -> np.ndarray:
-        n = state.size // (1 + n_theta)
-        p_n, W_n = state[:n], state[n:].reshape(n, n_theta)
-        return self.gamma_n * (W_n.T @ p_n)
+        p_n, W_n = self._split_floats(state.size // (1 + n_theta), n_theta, state.tolist())
+        return np.array([self.gamma_n * dot(column, p_n) for column in zip(*W_n)])

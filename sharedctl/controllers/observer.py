@@ -15,7 +15,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .base import cached_gain
+from ..short_vectors import floats
+from .base import cached_gain_floats
 from .smooth_sign import smooth_sign
 
 
@@ -32,27 +33,29 @@ class VelocityObserver:
         v0 = np.zeros_like(q0) if v0 is None else v0
         return np.concatenate([q0, v0])
 
-    def _gains(self, n):
-        ka, kb = cached_gain(self, "Ka", n), cached_gain(self, "Kb", n)
+    def _gains(self, n) -> tuple[tuple, tuple, tuple]:
+        """(K_a, K_b, K_c = K_a − I) as tuples of floats, validated once per change of the gains."""
+        ka, kb = cached_gain_floats(self, "Ka", n), cached_gain_floats(self, "Kb", n)
         checked = self.__dict__.get("_checked_gains")
         if checked is not None and checked[0] is ka and checked[1] is kb:
             return checked
-        if np.any(ka <= 1.0):
+        if any(k <= 1.0 for k in ka):
             raise ValueError("observer needs K_a > 1 so that K_c = K_a − I is positive")
-        kc = ka - 1.0
-        kc.flags.writeable = False
-        self.__dict__["_checked_gains"] = (ka, kb, kc)
-        return ka, kb, kc
+        self.__dict__["_checked_gains"] = (ka, kb, tuple(k - 1.0 for k in ka))
+        return self.__dict__["_checked_gains"]
 
     def velocity(self, q: np.ndarray, state: np.ndarray) -> np.ndarray:
-        """v̂ = β_o + K_a (q − q̂)."""
-        n = q.size
-        ka = cached_gain(self, "Ka", n)
-        return state[n:] + ka * (q - state[:n])
+        """v̂ = β_o + K_a (q − q̂) (on Python floats)."""
+        n = len(q)
+        ka, state = cached_gain_floats(self, "Ka", n), floats(state)
+        return np.array([b + k * (qj - qh) for b, k, qj, qh in zip(state[n:], ka, floats(q), state[:n])])
 
     def derivative(self, q: np.ndarray, state: np.ndarray) -> np.ndarray:
-        n = q.size
+        """[q̂̇, β̇_o] of (40) (on Python floats)."""
+        n = len(q)
         ka, kb, kc = self._gains(n)
-        q_tilde = q - state[:n]
-        beta = state[n:]
-        return np.concatenate([beta + ka * q_tilde, kb * smooth_sign(q_tilde, self.sign_width) + kc * q_tilde])
+        state = floats(state)
+        q_tilde = [qj - qh for qj, qh in zip(floats(q), state[:n])]
+        sign = smooth_sign(np.array(q_tilde), self.sign_width).tolist()
+        return np.array([b + k * e for b, k, e in zip(state[n:], ka, q_tilde)]
+                        + [k * sg + c * e for k, sg, c, e in zip(kb, sign, kc, q_tilde)])

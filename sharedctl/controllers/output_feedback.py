@@ -19,11 +19,13 @@ as the paper invokes for (38)). sgn is the smooth sign tanh(·/φ). docs/control
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
 
-from .base import LawOutput, MachineLaw, cached_gain
+from ..short_vectors import dot, floats, matvec
+from .base import LawOutput, MachineLaw, cached_gain_floats
 from .smooth_sign import smooth_sign
 
 
@@ -46,21 +48,26 @@ class OutputFeedbackLaw(MachineLaw):
         return np.concatenate([np.zeros(model.n), (self.k2 + 1.0) * c.z])
 
     def evaluate(self, model, group, c, q, v_hat, theta_hat, state) -> LawOutput:
-        n = model.n
-        z_f, xi = state[:n], state[n:]
-        z = c.z
+        """(25)–(29) on Python floats (short_vectors); numpy arrays in and out."""
+        n, f, cf = model.n, group.floats, c.floats
+        state = floats(state)
+        z_f, xi, z, x = state[:n], state[n:], cf.z, cf.x
         k = self.k2 + 1.0
-        r_f = xi - k * z
-        ez = np.exp(z)
-        both = group.K_inv @ np.array([ez * c.x_r_dot, ez * c.x_r_ddot]).T     # w, ẇ₀ in one product
-        w, w0_dot = both[:, 0], both[:, 1]
-        Psi = model.regressor(q, w, w, w0_dot)
-        k1 = cached_gain(self, "K1", n)
-        inner = -k1 * smooth_sign(z + z_f, self.sign_width) + k * r_f - z
-        u = group.K.T @ (self.stiffness * inner / c.x) + Psi @ theta_hat
-        z_f_dot = -z_f + r_f
-        xi_dot = -r_f - k * (z + r_f) + z - z_f
-        zd_hat = (group.K @ v_hat) / c.x - c.x_r_dot / c.x_r
-        eta_hat = zd_hat + z + r_f
-        theta_dot = -(Psi.T @ (group.K_inv @ (c.x * eta_hat))) / self.gamma_theta
-        return LawOutput(u, theta_dot, np.concatenate([z_f_dot, xi_dot]))
+        r_f = [xij - k * zj for xij, zj in zip(xi, z)]
+        ez = [math.exp(zj) for zj in z]
+        w = matvec(f.K_inv, [e * d for e, d in zip(ez, cf.x_r_dot)])
+        w0_dot = matvec(f.K_inv, [e * dd for e, dd in zip(ez, cf.x_r_ddot)])        # ẇ₀
+        Psi = model.regressor_rows(floats(q), w, w, w0_dot)
+        k1 = cached_gain_floats(self, "K1", n)
+        sign = smooth_sign(np.array([zj + zfj for zj, zfj in zip(z, z_f)]), self.sign_width).tolist()
+        inner = [-k1j * sj + k * rj - zj for k1j, sj, rj, zj in zip(k1, sign, r_f, z)]
+        pushed = matvec(f.K_transposed, [self.stiffness * ij / xj for ij, xj in zip(inner, x)])
+        theta = floats(theta_hat)
+        u = [pj + dot(row, theta) for pj, row in zip(pushed, Psi)]
+        z_f_dot = [-zfj + rj for zfj, rj in zip(z_f, r_f)]
+        xi_dot = [-rj - k * (zj + rj) + zj - zfj for rj, zj, zfj in zip(r_f, z, z_f)]
+        zd_hat = [kv / xj - d / xr for kv, xj, d, xr in zip(matvec(f.K, floats(v_hat)), x, cf.x_r_dot, cf.x_r)]
+        eta_hat = [zdj + zj + rj for zdj, zj, rj in zip(zd_hat, z, r_f)]
+        n_eta = matvec(f.K_inv, [xj * ej for xj, ej in zip(x, eta_hat)])                # N η̂
+        theta_dot = [-dot(column, n_eta) / self.gamma_theta for column in zip(*Psi)]
+        return LawOutput(np.array(u), np.array(theta_dot), np.array(z_f_dot + xi_dot))

@@ -74,6 +74,20 @@ class EulerLagrangeModel(ABC):
         """Y(q, v, w, a) with Y θ = M(q) a + C(q, v) w + g(q) (the regressor of (11))."""
         return self.mass_regressor(q, a) + self.coriolis_regressor(q, v, w) + self.gravity_regressor(q)
 
+    # ----- the regressors on lists of Python floats, as lists of rows (for the laws' per-sample
+    # arithmetic, short_vectors); a model may write them out on floats --------------------------
+    def regressor_rows(self, q: list, v: list, w: list, a: list) -> list:
+        return self.regressor(np.array(q), np.array(v), np.array(w), np.array(a)).tolist()
+
+    def mass_regressor_rows(self, q: list, a: list) -> list:
+        return self.mass_regressor(np.array(q), np.array(a)).tolist()
+
+    def coriolis_regressor_rows(self, q: list, v: list, w: list) -> list:
+        return self.coriolis_regressor(np.array(q), np.array(v), np.array(w)).tolist()
+
+    def mass_rate_regressor_rows(self, q: list, v: list, b: list) -> list:
+        return self.mass_rate_regressor(np.array(q), np.array(v), np.array(b)).tolist()
+
     def mass(self, q: np.ndarray, theta: np.ndarray | None = None) -> np.ndarray:
         """M(q) built column by column from the regressor."""
         th = self.theta if theta is None else theta

@@ -70,6 +70,21 @@ class OmniRobot(EulerLagrangeModel):
         psi_dot = float(v[2])
         return np.array([[a0, 0.0, psi_dot * float(w[1])], [a1, 0.0, -psi_dot * float(w[0])], [0.0, a2, 0.0]])
 
+    def regressor_rows(self, q, v, w, a):
+        """`regressor` on Python floats: [[a0, 0, ψ̇ w1], [a1, 0, −ψ̇ w0], [0, a2, 0]]."""
+        psi_dot = v[2]
+        return [[a[0], 0.0, psi_dot * w[1]], [a[1], 0.0, -psi_dot * w[0]], [0.0, a[2], 0.0]]
+
+    def mass_regressor_rows(self, q, a):
+        return [[a[0], 0.0, 0.0], [a[1], 0.0, 0.0], [0.0, a[2], 0.0]]
+
+    def coriolis_regressor_rows(self, q, v, w):
+        psi_dot = v[2]
+        return [[0.0, 0.0, psi_dot * w[1]], [0.0, 0.0, -psi_dot * w[0]], [0.0, 0.0, 0.0]]
+
+    def mass_rate_regressor_rows(self, q, v, b):
+        return [[0.0, 0.0, 0.0], [0.0, 0.0, 0.0], [0.0, 0.0, 0.0]]
+
     def gravity_regressor(self, q):
         return np.zeros((3, 3))
 

@@ -47,3 +47,11 @@ def test_the_command_line_exits_2_on_a_bad_settings_file(tmp_path, capsys):
     path.write_text("ratee = 500\n")
     assert main(["controller", "--service-config", str(path)]) == 2
     assert "ratee" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("value, expected", [("true", True), ("false", False)])
+def test_a_default_on_switch_can_be_turned_off_in_a_settings_file(tmp_path, value, expected):
+    path = tmp_path / "controller.toml"
+    path.write_text(f"sensor-sync = {value}\n")
+    argv = expand(["controller", "--service-config", str(path)], build_parser())
+    assert build_parser().parse_args(argv).sensor_sync is expected

@@ -89,3 +89,33 @@ def test_targets_are_judged_and_unmeasured_figures_become_null():
     assert targets["bus_load.fraction_1mbit"]["met"] is False
     assert targets["loop.jitter_p99_us"]["met"] is None
     assert finite_or_null({"a": [math.inf, 1.0]}) == {"a": [None, 1.0]}
+
+
+def test_the_daemon_summary_line_is_parsed_with_and_without_the_torque_out_figures():
+    from sharedctl.services.bench.stack_run import SUMMARY
+    from sharedctl.services.controller.loop_summary import Summary
+
+    line = Summary(ticks=9000, elapsed=18.0, rate=500.0, missed=1, late=2, jitter_p50_ms=0.01, jitter_p99_ms=0.09,
+                   jitter_max_ms=1.0, compute_p50_ms=0.36, compute_p99_ms=1.13, torque_out_p50_ms=0.34,
+                   torque_out_p99_ms=0.53, cpu_percent=43.0).line()
+    g = SUMMARY.search(line).groupdict()
+    assert (g["missed"], g["late"], g["c50"], g["o50"], g["o99"], g["cpu"]) == ("1", "2", "0.360", "0.340", "0.530", "43")
+    older = line.replace(", torque out p50 0.340 ms p99 0.530 ms", "")
+    g = SUMMARY.search(older).groupdict()
+    assert g["o50"] is None and g["c99"] == "1.130" and g["cpu"] == "43"
+
+
+def test_estimates_that_arrived_after_the_tick_started_are_not_counted_as_used():
+    """Estimates 0.3 ms before each burst; the tick started 0.25 ms before it (torque out) — they were used —
+    while the whole compute time (0.5 ms, telemetry included) would have cut them off."""
+    period, frames = 0.002, []
+    for k in range(200):
+        burst = 0.001 + k * period
+        for node in range(3):
+            frames.append(_frame(burst - 0.0003, node, CommandId.GET_ENCODER_ESTIMATES))
+            frames.append(_frame(burst + 1e-5 * node, node, CommandId.SET_INPUT_TORQUE, struct.pack("<f", 1.0)))
+    with_out = analyse(frames, [], (0.0, 0.4), 500.0, {"compute_p50_us": 500.0, "torque_out_p50_us": 250.0,
+                                                          "missed": 0, "late": 0})
+    compute_only = analyse(frames, [], (0.0, 0.4), 500.0, {"compute_p50_us": 500.0, "missed": 0, "late": 0})
+    assert with_out["latency"]["sensor_to_torque_us"]["p50"] == pytest.approx(300.0, abs=1e-3)
+    assert compute_only["latency"]["sensor_to_torque_us"]["p50"] == pytest.approx(2300.0, abs=1e-3)

@@ -1,0 +1,74 @@
+"""The controller loop's own timing record: fixed-memory histograms and the exit summary line.
+
+The summary line is parsed by `sharedctl bench` (services/bench/stack_run.py) and the fault
+campaign: keep its wording.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+
+class LatenessHistogram:
+    """Tick lateness in 10 µs bins up to 50 ms (quantiles over the whole run, fixed memory)."""
+
+    BIN = 1e-5
+
+    def __init__(self, bins: int = 5000) -> None:
+        self.counts = np.zeros(bins + 1, dtype=np.int64)
+        self.n = 0
+        self.max = 0.0
+
+    def add(self, lateness: float) -> None:
+        self.counts[min(int(lateness / self.BIN), len(self.counts) - 1)] += 1
+        self.n += 1
+        self.max = max(self.max, lateness)
+
+    def quantile(self, p: float) -> float:
+        if self.n == 0:
+            return 0.0
+        k = int(np.searchsorted(np.cumsum(self.counts), math.ceil(p * self.n)))
+        return (k + 1) * self.BIN
+
+
+@dataclass
+class Summary:
+    ticks: int = 0
+    elapsed: float = 0.0
+    rate: float = 0.0
+    missed: int = 0
+    late: int = 0
+    jitter_p50_ms: float = 0.0
+    jitter_p99_ms: float = 0.0
+    jitter_max_ms: float = 0.0
+    cpu_percent: float = 0.0
+    compute_p50_ms: float = 0.0
+    compute_p99_ms: float = 0.0
+    torque_out_p50_ms: float = 0.0
+    torque_out_p99_ms: float = 0.0
+    frames_rx: int = 0
+    frames_tx: int = 0
+    bad_frames: int = 0
+    implausible_estimates: int = 0
+    commands_accepted: int = 0
+    rejections: dict = field(default_factory=dict)
+    estops: int = 0
+    saturated: int = 0
+    mode: str = ""
+
+    def line(self) -> str:
+        rej = sum(self.rejections.values())
+        detail = ", ".join(f"{k} {v}" for k, v in sorted(self.rejections.items()))
+        return (
+            f"sharedctl controller: stopped after {self.elapsed:.1f} s: {self.ticks} ticks at {self.rate:.1f} Hz, "
+            f"{self.missed} missed / {self.late} late deadlines, jitter p50 {self.jitter_p50_ms:.3f} ms "
+            f"p99 {self.jitter_p99_ms:.3f} ms max {self.jitter_max_ms:.2f} ms, compute p50 {self.compute_p50_ms:.3f} ms "
+            f"p99 {self.compute_p99_ms:.3f} ms, torque out p50 {self.torque_out_p50_ms:.3f} ms p99 "
+            f"{self.torque_out_p99_ms:.3f} ms, CPU {self.cpu_percent:.0f}% of one core; "
+            f"CAN frames rx {self.frames_rx} tx {self.frames_tx} bad {self.bad_frames}, implausible encoder values "
+            f"{self.implausible_estimates}; operator commands "
+            f"{self.commands_accepted} accepted, {rej} rejected{f' ({detail})' if detail else ''}; "
+            f"estops {self.estops}, torque-limited ticks {self.saturated}"
+        )

@@ -1,0 +1,99 @@
+"""Operator commands from the Zenoh thread are queued and judged by the loop thread
+(services/controller/daemon.py: `_on_command`, `apply_commands`), in arrival order, and before
+any lease query is answered; the warm-up before the clock starts changes nothing."""
+import time
+
+import numpy as np
+
+from sharedctl.protocol.messages import ControlRequest, LeaseAction, LeaseReply, LeaseRequest, OperatorCommand
+from sharedctl.protocol.msgpack_codec import decode_message, encode_message
+from sharedctl.services.controller import daemon as daemon_module
+
+from .test_controller_loop import arm, daemon, feed  # noqa: F401 — the fixture
+
+Q0 = (-0.9, 3.0, 0.0)
+
+
+class Payload:
+    def __init__(self, data):
+        self.data = data
+
+    def to_bytes(self):
+        return self.data
+
+
+class Sample:
+    def __init__(self, data):
+        self.payload = Payload(data)
+
+
+class Query(Sample):
+    def __init__(self, data):
+        super().__init__(data)
+        self.replies = []
+
+    def reply(self, key, payload):
+        self.replies.append(decode_message(payload, expect=LeaseReply))
+
+
+def command(seq, joystick=(0.0, 0.2, 0.0), operator_id="op"):
+    return encode_message(OperatorCommand(
+        operator_id=operator_id, session_id="s", seq=seq, send_time=time.time(), joystick=joystick, q_d=Q0,
+        qd_d=(0.0, 0.0, 0.0), qdd_d=(0.0, 0.0, 0.0), deadman=True, estop=False, control_request=ControlRequest.NONE))
+
+
+def test_a_received_command_is_queued_and_judged_at_the_next_tick(daemon):  # noqa: F811
+    arm(daemon)
+    daemon._on_command(Sample(command(1)))
+    assert daemon.policy.accepted == 0 and len(daemon.pending_commands) == 1
+    feed(daemon, 10.004, heartbeat=False)
+    daemon.tick(10.004)
+    assert daemon.policy.accepted == 1 and not daemon.pending_commands
+    assert daemon.out.u_h[1] > 0.0                       # the queued command drove this very tick
+
+
+def test_queued_commands_are_judged_in_arrival_order(daemon):  # noqa: F811
+    for seq in (1, 3, 2):                                # 2 arrives after 3: out of order
+        daemon._on_command(Sample(command(seq)))
+    with daemon.lock:
+        daemon.apply_commands()
+    assert daemon.policy.accepted == 2 and daemon.policy.current.seq == 3
+    assert sum(daemon.policy.rejections.values()) == 1
+
+
+def test_a_bad_payload_is_still_counted_as_rejected(daemon):  # noqa: F811
+    daemon._on_command(Sample(b"\x00not msgpack"))
+    with daemon.lock:
+        daemon.apply_commands()
+    assert daemon.policy.accepted == 0 and daemon.policy.rejected == 1
+
+
+def test_a_lease_query_is_answered_after_the_commands_that_arrived_before_it(daemon):  # noqa: F811
+    """Implicit lease: a command takes the free lease; the holder's release that follows must find it held."""
+    daemon._on_command(Sample(command(1)))
+    request = encode_message(LeaseRequest(operator_id="op", session_id="s", seq=1, time=time.time(),
+                                          action=LeaseAction.RELEASE))
+    query = Query(request)
+    daemon._on_lease_query(query)
+    assert daemon.policy.accepted == 1 and not daemon.pending_commands
+    assert query.replies[0].granted and daemon.policy.lease.holder_id is None
+
+
+def test_a_full_queue_refuses_and_counts_the_overflow(daemon, monkeypatch):  # noqa: F811
+    monkeypatch.setattr(daemon_module, "MAX_PENDING_COMMANDS", 3)
+    for seq in range(1, 6):
+        daemon._on_command(Sample(command(seq)))
+    with daemon.lock:
+        daemon.apply_commands()
+    assert daemon.policy.accepted == 3
+    assert daemon.policy.rejections["command_queue_full"] == 2
+
+
+def test_the_warm_up_sends_nothing_and_keeps_every_state(daemon):  # noqa: F811
+    state, q = daemon.state, daemon.q.copy()
+    before = (daemon.policy.accepted, daemon.odometry.updates, daemon.state_seq, daemon.mode)
+    daemon.warm_up()
+    assert daemon.master.bus.take() == []
+    assert daemon.state is state and np.array_equal(daemon.q, q)
+    assert (daemon.policy.accepted, daemon.odometry.updates, daemon.state_seq, daemon.mode) == before
+    assert daemon.session.publishers["sharedctl/v1/unit/state"].payloads == []
