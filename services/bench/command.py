@@ -9,6 +9,7 @@
     bus_load.fraction_1mbit                            frames seen on the bus, worst-case stuffing
     cpu.fraction_of_one_core                           robot + controller at 500 Hz
     machine.{cpu,cores,kernel,python,loadavg_before,loadavg_after}
+    machine_floor.{deadline_misses,lateness_us,work_wall_us,work_thread_cpu_us,…}   a bare loop (machine_floor.py)
 
 --markdown OUT writes the same as tables (docs/performance/bench.md); --from-json IN re-renders a saved run.
 --quick: 15 s at 500 Hz, 8 s at 1 kHz, shorter step trajectories (under 3 minutes); the full run:
@@ -25,8 +26,10 @@ import platform
 import time
 from pathlib import Path
 
-from . import control_step, stack_run
+from . import control_step, machine_floor, stack_run
 from .markdown import lookup
+
+FLOOR_WORK_US = 400.0   # µs of CPU per tick in the machine-floor loop: the daemon's median tick compute
 
 TARGETS = {
     "control_step_us.ce.median": ("≤", 50.0),
@@ -89,6 +92,18 @@ def batched(quick: bool) -> dict:
                 "reason": f"measure_batched failed: {type(exc).__name__}: {exc}"}
 
 
+def _stack_run(*args, progress=print, **kwargs) -> dict:
+    """`stack_run.run`, once more with fresh ports if a loopback port picked for it was taken before its
+    listener bound it (another process's outgoing connection can draw the same ephemeral port)."""
+    try:
+        return stack_run.run(*args, **kwargs)
+    except Exception as exc:  # noqa: BLE001 — zenoh.ZError is not importable without zenoh
+        if "Address already in use" not in str(exc):
+            raise
+        progress(f"a loopback port was taken before the stack bound it ({type(exc).__name__}); again with new ports …")
+        return stack_run.run(*args, **kwargs)
+
+
 def collect(quick: bool, skip_stack: bool = False, progress=print) -> dict:
     report: dict = {"quick": quick, "machine": machine(), "started": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())}
     progress("control step …")
@@ -101,10 +116,12 @@ def collect(quick: bool, skip_stack: bool = False, progress=print) -> dict:
         }
     if not skip_stack:
         seconds, seconds_1k = (15.0, 8.0) if quick else (60.0, 20.0)
+        progress(f"machine floor: a bare 500 Hz loop with the daemon's median work, {seconds:g} s …")
+        report["machine_floor"] = machine_floor.measure(500.0, seconds, work_us=FLOOR_WORK_US)
         progress(f"stack at 500 Hz for {seconds:g} s …")
-        run500 = stack_run.run(500.0, seconds)
+        run500 = _stack_run(500.0, seconds, progress=progress)
         progress(f"stack at 1 kHz for {seconds_1k:g} s …")
-        run1k = stack_run.run(1000.0, seconds_1k, probes=False)
+        run1k = _stack_run(1000.0, seconds_1k, probes=False, progress=progress)
         report["loop"] = run500["loop"]
         report["latency"] = run500["latency"]
         report["bus_load"] = run500["bus_load"]
@@ -112,7 +129,7 @@ def collect(quick: bool, skip_stack: bool = False, progress=print) -> dict:
         report["loop_1khz"] = dict(run1k["loop"], sensor_to_torque_us=run1k["latency"]["sensor_to_torque_us"],
                                    bus_load=run1k["bus_load"], cpu=run1k["cpu"])
         progress(f"stack at 500 Hz, free-running ticks (--no-sensor-sync), for {seconds_1k:g} s …")
-        free = stack_run.run(500.0, seconds_1k, probes=False, controller_args=("--no-sensor-sync",))
+        free = _stack_run(500.0, seconds_1k, probes=False, controller_args=("--no-sensor-sync",), progress=progress)
         report["loop_free_running"] = dict(free["loop"], sensor_to_torque_us=free["latency"]["sensor_to_torque_us"],
                                            operator_to_torque_us=free["latency"]["operator_to_torque_us"])
         report["stack"] = {name: {k: r[k] for k in ("processes", "robot_priority", "log_dir")}
@@ -140,6 +157,7 @@ def ratios(report: dict) -> dict:
         "ce_step_in_numpy_calls": over("control_step_us.ce.median", "control_step_detail.floors_ns.numpy_ufunc_3_ns") and
         over("control_step_us.ce.median", "control_step_detail.floors_ns.numpy_ufunc_3_ns") * 1e3,
         "ce_step_over_period_500hz": (lookup(report, "control_step_us.ce.median") or math.nan) / 2000.0,
+        "loop_misses_over_machine_floor_misses": over("loop.deadline_misses", "machine_floor.deadline_misses"),
         "loop_1khz_rate_over_target": (lookup(report, "loop_1khz.rate_hz") or math.nan) / 1000.0,
     }
 
@@ -176,7 +194,8 @@ def table(report: dict):
     rows += ["loop.rate_hz", "loop.deadline_misses", "loop.jitter_p99_us", "loop_1khz.rate_hz",
              "loop_1khz.deadline_misses", "loop_1khz.jitter_p99_us", "loop_free_running.deadline_misses",
              "loop_free_running.jitter_p99_us", "loop_free_running.sensor_to_torque_us.p50",
-             "loop_free_running.sensor_to_torque_us.p99"]
+             "loop_free_running.sensor_to_torque_us.p99", "machine_floor.deadline_misses",
+             "machine_floor.lateness_us.p99", "machine_floor.work_wall_us.p99", "machine_floor.work_wall_us.max"]
     rows += [f"latency.{k}.{s}" for k in ("sensor_to_torque_us", "operator_to_torque_us", "zenoh_floor_us", "can_floor_us")
              for s in ("p50", "p99")]
     rows += ["batched_sim.robots", "batched_sim.steps_per_s", "batched_sim.scalar_steps_per_s",

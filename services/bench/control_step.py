@@ -63,18 +63,33 @@ def _run(loop, q0, controller, inputs, clock=time.perf_counter_ns):
 
 def step_times(law: str, seconds: float, repeats: int) -> dict:
     """µs per step along the trajectory: headline (machine engaged) median/p99, plus all and human-only."""
-    loop, q0, controller, inputs = _replay_inputs(_scenario(), law, seconds)
-    _run(loop, q0, controller, inputs)                       # warm-up (caches, branch paths)
-    runs = [_run(loop, q0, controller, inputs) for _ in range(repeats)]
-    times = np.concatenate([r[0] for r in runs])
-    engaged = np.concatenate([r[1] for r in runs])
-    head = percentiles(times[engaged])
-    cpu, cpu_engaged = _run(loop, q0, controller, inputs, clock=time.thread_time_ns)   # CPU time: what load does not add
-    return {
-        "median": head["median"], "p99": head["p99"], "steps": int(engaged.sum()),
-        "thread_cpu_median": float(np.median(cpu[cpu_engaged])) if cpu_engaged.any() else None,
-        "all": _brief(percentiles(times)), "operator_only": _brief(percentiles(times[~engaged])),
-    }
+    return interleaved_step_times((law,), seconds, repeats)[law]
+
+
+def interleaved_step_times(laws, seconds: float, repeats: int) -> dict:
+    """`step_times` of several laws measured in turns: round r replays every law once, so a slow spell
+    of the host (a neighbour on the hypervisor, another job) falls on every law alike rather than on
+    whichever law was being timed. Each law is replayed once untimed first (caches, branch paths)."""
+    replays = {law: _replay_inputs(_scenario(), law, seconds) for law in laws}
+    for replay in replays.values():
+        _run(*replay)                                        # warm-up
+    runs = {law: [] for law in laws}
+    for _ in range(repeats):
+        for law in laws:
+            runs[law].append(_run(*replays[law]))
+    result = {}
+    for law in laws:
+        times = np.concatenate([r[0] for r in runs[law]])
+        engaged = np.concatenate([r[1] for r in runs[law]])
+        head = percentiles(times[engaged])
+        cpu, cpu_engaged = _run(*replays[law], clock=time.thread_time_ns)   # CPU time: what load does not add
+        result[law] = {
+            "median": head["median"], "p99": head["p99"], "steps": int(engaged.sum()),
+            "thread_cpu_median": float(np.median(cpu[cpu_engaged])) if cpu_engaged.any() else None,
+            "round_medians": [float(np.median(r[0][r[1]])) if r[1].any() else None for r in runs[law]],
+            "all": _brief(percentiles(times)), "operator_only": _brief(percentiles(times[~engaged])),
+        }
+    return result
 
 
 def _brief(stats: dict) -> dict:
@@ -193,5 +208,5 @@ def scaling(group_counts=(1, 2, 4, 8, 16), law: str = "ce", repeats: int = 3) ->
 
 
 def measure(quick: bool) -> dict:
-    seconds, repeats = (3.0, 2) if quick else (8.0, 5)
-    return {law: step_times(law, seconds, repeats) for law in LAWS}
+    seconds, repeats = (3.0, 6) if quick else (8.0, 10)
+    return interleaved_step_times(LAWS, seconds, repeats)

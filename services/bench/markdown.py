@@ -85,6 +85,18 @@ def render(report: dict) -> str:
     if per:
         out.append(f"| CPU per process at 500 Hz | {', '.join(f'{k} {_fmt(v)}' for k, v in per.items())} | | |")
     b = report.get("batched_sim") or {}
+    floor = report.get("machine_floor")
+    if floor:
+        out += ["", f"Machine floor (machine_floor.py): a bare {_fmt(floor['rate_hz'])} Hz loop in a fresh process, "
+                f"{_fmt(floor['work_us'])} µs of pure-Python work per tick, SCHED_FIFO {'yes' if floor['realtime'] else 'no'}, "
+                f"{_fmt(floor['seconds'])} s:", "",
+                "| deadline misses (missed / late) | lateness p50 / p99 / max µs | work wall p50 / p99 / max µs | "
+                "work thread CPU p50 / p99 / max µs | ticks whose work took over half a period | steal s |",
+                "|---:|---:|---:|---:|---:|---:|",
+                f"| {floor['deadline_misses']} ({floor['missed']} / {floor['late']}) | "
+                + " | ".join(" / ".join(_fmt(floor[k][q]) for q in ("p50", "p99", "max"))
+                             for k in ("lateness_us", "work_wall_us", "work_thread_cpu_us"))
+                + f" | {floor['ticks_over_half_period']} | {_fmt(floor['steal_s'])} |", ""]
     out += ["", "## Batched simulator", "", "| robots | robot-steps/s | scalar steps/s | speed-up |", "|---:|---:|---:|---:|",
             f"| {_fmt(b.get('robots'))} | {_fmt(b.get('steps_per_s'))} | {_fmt(b.get('scalar_steps_per_s'))} | "
             f"{_fmt(b.get('speedup_vs_scalar'))} |"]

@@ -1,0 +1,94 @@
+"""The floor the machine allows a periodic loop: a loop that does the daemon's amount of work and nothing else.
+
+The controller daemon's tick is I/O (CAN frames in and out, Zenoh) around a fixed amount of
+Python computation (odometry, the control step, packing frames: ≈ 0.4 ms at the median). This
+loop keeps the timing and drops the I/O: a fresh process (no Zenoh or CAN threads, so no other
+thread can hold the GIL), its thread at SCHED_FIFO where permitted, the daemon's `RateClock`
+with the same spin, and in every period the same pure-Python float workload, calibrated once to
+`work_us` of thread CPU time. A deadline counts as missed exactly as the daemon counts it
+(periods skipped, or a tick started more than half a period late).
+
+What it shows: how much longer the *same* work takes from one period to the next on this host
+(wall and thread CPU time per tick — on a virtual machine the vCPU can run slower for a while
+when its neighbours on the physical host are busy, which thread CPU time does not hide), and how
+many deadlines a loop of this shape misses with nothing of the project in it. The daemon's misses
+above this floor are the daemon's; those at it are the machine's.
+"""
+from __future__ import annotations
+
+import multiprocessing
+import os
+import time
+
+import numpy as np
+
+from ..controller.priority import make_loop_realtime
+from ..lifecycle import RateClock
+from .statistics import percentiles
+
+
+def _work(iterations: int) -> float:
+    """A fixed piece of pure-Python float arithmetic (what the daemon's tick is made of)."""
+    x, y = 0.5, 0.25
+    for _ in range(iterations):
+        x = x * 0.999 + y * 0.001
+        y = y * 0.998 + x * 0.002
+    return x + y
+
+
+def _calibrate(work_us: float) -> int:
+    """Iterations whose median thread CPU time is ≈ work_us (median of 50 timings at the final size)."""
+    iterations = 1000
+    for _ in range(4):
+        samples = []
+        for _ in range(50):
+            t0 = time.thread_time_ns()
+            _work(iterations)
+            samples.append(time.thread_time_ns() - t0)
+        iterations = max(1, round(iterations * work_us * 1e3 / float(np.median(samples))))
+    return iterations
+
+
+def _steal_jiffies() -> int | None:
+    try:
+        with open("/proc/stat") as f:
+            return int(f.readline().split()[8])
+    except (OSError, IndexError, ValueError):
+        return None
+
+
+def _loop(rate_hz: float, seconds: float, work_us: float, spin: float) -> dict:
+    realtime = make_loop_realtime()
+    iterations = _calibrate(work_us)
+    period = 1.0 / rate_hz
+    ticks = int(seconds * rate_hz)
+    lateness, wall, cpu = np.empty(ticks), np.empty(ticks), np.empty(ticks)
+    steal0 = _steal_jiffies()
+    clock = RateClock(period, spin=spin)
+    late = 0
+    for k in range(ticks):
+        lateness[k] = clock.wait()
+        late += lateness[k] > period / 2
+        w0, c0 = time.perf_counter_ns(), time.thread_time_ns()
+        _work(iterations)
+        wall[k], cpu[k] = time.perf_counter_ns() - w0, time.thread_time_ns() - c0
+    steal1 = _steal_jiffies()
+    us = lambda a: {k: v / 1e3 for k, v in percentiles(a).items() if k != "n"}   # noqa: E731
+    return {
+        "rate_hz": rate_hz, "seconds": seconds, "work_us": work_us, "realtime": realtime, "ticks": ticks,
+        "deadline_misses": int(clock.missed + late), "missed": int(clock.missed), "late": int(late),
+        "lateness_us": us(lateness * 1e9), "work_wall_us": us(wall), "work_thread_cpu_us": us(cpu),
+        "ticks_over_half_period": int((wall > period * 0.5e9).sum()),
+        "steal_s": None if steal0 is None or steal1 is None else (steal1 - steal0) / os.sysconf("SC_CLK_TCK"),
+    }
+
+
+def measure(rate_hz: float = 500.0, seconds: float = 20.0, work_us: float = 400.0, spin: float = 1e-4) -> dict:
+    """Run the loop in a fresh process (spawned: no threads inherited) and return its figures."""
+    with multiprocessing.get_context("spawn").Pool(1) as pool:
+        return pool.apply(_loop, (rate_hz, seconds, work_us, spin))
+
+
+if __name__ == "__main__":
+    import json
+    print(json.dumps(measure(seconds=10.0), indent=1))

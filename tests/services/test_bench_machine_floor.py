@@ -1,0 +1,25 @@
+"""The machine-floor loop of `sharedctl bench` (services/bench/machine_floor.py): its bookkeeping, never its timing."""
+import pytest
+
+from sharedctl.services.bench import machine_floor
+from sharedctl.services.bench.markdown import render
+
+pytestmark = pytest.mark.processes      # measure() spawns a process
+
+
+def test_the_floor_loop_runs_every_tick_and_counts_misses_as_the_daemon_does():
+    floor = machine_floor.measure(rate_hz=500.0, seconds=0.2, work_us=50.0)
+    assert floor["ticks"] == 100
+    assert floor["deadline_misses"] == floor["missed"] + floor["late"]
+    assert floor["work_thread_cpu_us"]["p50"] > 0.0
+    assert floor["work_wall_us"]["max"] >= floor["work_wall_us"]["p50"]
+
+
+def test_the_calibrated_work_grows_with_the_budget():
+    assert machine_floor._calibrate(200.0) > machine_floor._calibrate(20.0)
+
+
+def test_the_report_renders_the_floor_table():
+    floor = machine_floor.measure(rate_hz=500.0, seconds=0.1, work_us=20.0)
+    text = render({"quick": True, "machine": {}, "machine_floor": floor})
+    assert "Machine floor" in text and f"| {floor['deadline_misses']} (" in text
