@@ -9,7 +9,9 @@
     bus_load.fraction_1mbit                            frames seen on the bus, worst-case stuffing
     cpu.fraction_of_one_core                           robot + controller at 500 Hz
     machine.{cpu,cores,kernel,python,loadavg_before,loadavg_after}
-    machine_floor.{deadline_misses,lateness_us,work_wall_us,work_thread_cpu_us,…}   a bare loop (machine_floor.py)
+    machine_floor.{deadline_misses,lateness_us,send_jitter_us,pre_send_wall_us,work_thread_cpu_us,…}
+                                                       a bare loop with the daemon's amounts of work, right after
+                                                       the 500 Hz run (machine_floor.py)
 
 --markdown OUT writes the same as tables (docs/performance/bench.md); --from-json IN re-renders a saved run.
 --quick: 15 s at 500 Hz, 8 s at 1 kHz, shorter step trajectories (under 3 minutes); the full run:
@@ -27,9 +29,9 @@ import time
 from pathlib import Path
 
 from . import control_step, machine_floor, stack_run
-from .markdown import lookup
+from .markdown import SENSOR_LEAD_US, lookup
 
-FLOOR_WORK_US = 400.0   # µs of CPU per tick in the machine-floor loop: the daemon's median tick compute
+FLOOR_WORK_US = 400.0   # µs of CPU per period in the machine-floor loop if the daemon's own figures are missing
 
 TARGETS = {
     "control_step_us.ce.median": ("≤", 50.0),
@@ -116,10 +118,15 @@ def collect(quick: bool, skip_stack: bool = False, progress=print) -> dict:
         }
     if not skip_stack:
         seconds, seconds_1k = (15.0, 8.0) if quick else (60.0, 20.0)
-        progress(f"machine floor: a bare 500 Hz loop with the daemon's median work, {seconds:g} s …")
-        report["machine_floor"] = machine_floor.measure(500.0, seconds, work_us=FLOOR_WORK_US)
         progress(f"stack at 500 Hz for {seconds:g} s …")
         run500 = _stack_run(500.0, seconds, progress=progress)
+        daemon = run500["loop"].get("daemon") or {}
+        pre = daemon.get("torque_out_p50_us") or FLOOR_WORK_US
+        work = max(daemon.get("loop_cpu_p50_us") or FLOOR_WORK_US, pre)
+        progress(f"machine floor: a bare 500 Hz loop with the daemon's amounts ({pre:.0f} µs to the send, "
+                 f"{work:.0f} µs per period), {seconds:g} s …")
+        report["machine_floor"] = machine_floor.measure(500.0, seconds, work_us=work, pre_send_us=pre,
+                                                        cpu=run500.get("cpus", {}).get("controller_loop"))
         progress(f"stack at 1 kHz for {seconds_1k:g} s …")
         run1k = _stack_run(1000.0, seconds_1k, probes=False, progress=progress)
         report["loop"] = run500["loop"]
@@ -132,7 +139,7 @@ def collect(quick: bool, skip_stack: bool = False, progress=print) -> dict:
         free = _stack_run(500.0, seconds_1k, probes=False, controller_args=("--no-sensor-sync",), progress=progress)
         report["loop_free_running"] = dict(free["loop"], sensor_to_torque_us=free["latency"]["sensor_to_torque_us"],
                                            operator_to_torque_us=free["latency"]["operator_to_torque_us"])
-        report["stack"] = {name: {k: r[k] for k in ("processes", "robot_priority", "log_dir")}
+        report["stack"] = {name: {k: r.get(k) for k in ("processes", "robot_priority", "cpus", "log_dir")}
                            for name, r in (("500hz", run500), ("1khz", run1k), ("500hz_free_running", free))}
     progress("batched simulator …")
     report["batched_sim"] = batched(quick)
@@ -142,12 +149,15 @@ def collect(quick: bool, skip_stack: bool = False, progress=print) -> dict:
     return report
 
 
+def _over_values(x, y):
+    ok = all(isinstance(v, (int, float)) and math.isfinite(v) and v > 0 for v in (x, y))
+    return x / y if ok else None
+
+
 def ratios(report: dict) -> dict:
     """Figures over the floor they stand on, measured in the same run (None where one is missing)."""
     def over(a, b):
-        x, y = lookup(report, a), lookup(report, b)
-        ok = all(isinstance(v, (int, float)) and math.isfinite(v) and v > 0 for v in (x, y))
-        return x / y if ok else None
+        return _over_values(lookup(report, a), lookup(report, b))
 
     return {
         "sensor_to_torque_over_can_floor_p50": over("latency.sensor_to_torque_us.p50", "latency.can_floor_us.p50"),
@@ -158,6 +168,12 @@ def ratios(report: dict) -> dict:
         over("control_step_us.ce.median", "control_step_detail.floors_ns.numpy_ufunc_3_ns") * 1e3,
         "ce_step_over_period_500hz": (lookup(report, "control_step_us.ce.median") or math.nan) / 2000.0,
         "loop_misses_over_machine_floor_misses": over("loop.deadline_misses", "machine_floor.deadline_misses"),
+        "loop_jitter_over_machine_floor_jitter_p99": over("loop.jitter_p99_us", "machine_floor.send_jitter_us.p99"),
+        "torque_out_over_machine_floor_pre_send_p99": over("loop.daemon.torque_out_p99_us",
+                                                           "machine_floor.pre_send_wall_us.p99"),
+        "sensor_to_torque_over_machine_floor_p99": _over_values(
+            lookup(report, "latency.sensor_to_torque_us.p99"),
+            SENSOR_LEAD_US + (lookup(report, "machine_floor.deadline_to_send_us.p99") or math.nan)),
         "loop_1khz_rate_over_target": (lookup(report, "loop_1khz.rate_hz") or math.nan) / 1000.0,
     }
 
@@ -195,6 +211,7 @@ def table(report: dict):
              "loop_1khz.deadline_misses", "loop_1khz.jitter_p99_us", "loop_free_running.deadline_misses",
              "loop_free_running.jitter_p99_us", "loop_free_running.sensor_to_torque_us.p50",
              "loop_free_running.sensor_to_torque_us.p99", "machine_floor.deadline_misses",
+             "machine_floor.send_jitter_us.p99", "machine_floor.deadline_to_send_us.p99",
              "machine_floor.lateness_us.p99", "machine_floor.work_wall_us.p99", "machine_floor.work_wall_us.max"]
     rows += [f"latency.{k}.{s}" for k in ("sensor_to_torque_us", "operator_to_torque_us", "zenoh_floor_us", "can_floor_us")
              for s in ("p50", "p99")]

@@ -3,6 +3,8 @@ from __future__ import annotations
 
 import math
 
+SENSOR_LEAD_US = 250.0   # the daemon's default --sensor-lead-us (services/controller/command.py)
+
 
 def _fmt(value, digits: int = 3) -> str:
     if value is None or (isinstance(value, float) and not math.isfinite(value)):
@@ -87,16 +89,7 @@ def render(report: dict) -> str:
     b = report.get("batched_sim") or {}
     floor = report.get("machine_floor")
     if floor:
-        out += ["", f"Machine floor (machine_floor.py): a bare {_fmt(floor['rate_hz'])} Hz loop in a fresh process, "
-                f"{_fmt(floor['work_us'])} µs of pure-Python work per tick, SCHED_FIFO {'yes' if floor['realtime'] else 'no'}, "
-                f"{_fmt(floor['seconds'])} s:", "",
-                "| deadline misses (missed / late) | lateness p50 / p99 / max µs | work wall p50 / p99 / max µs | "
-                "work thread CPU p50 / p99 / max µs | ticks whose work took over half a period | steal s |",
-                "|---:|---:|---:|---:|---:|---:|",
-                f"| {floor['deadline_misses']} ({floor['missed']} / {floor['late']}) | "
-                + " | ".join(" / ".join(_fmt(floor[k][q]) for q in ("p50", "p99", "max"))
-                             for k in ("lateness_us", "work_wall_us", "work_thread_cpu_us"))
-                + f" | {floor['ticks_over_half_period']} | {_fmt(floor['steal_s'])} |", ""]
+        out += _floor_section(report, floor)
     out += ["", "## Batched simulator", "", "| robots | robot-steps/s | scalar steps/s | speed-up |", "|---:|---:|---:|---:|",
             f"| {_fmt(b.get('robots'))} | {_fmt(b.get('steps_per_s'))} | {_fmt(b.get('scalar_steps_per_s'))} | "
             f"{_fmt(b.get('speedup_vs_scalar'))} |"]
@@ -107,3 +100,42 @@ def render(report: dict) -> str:
         out += ["", "## Ratios (same run)", "", "| ratio | value |", "|---|---:|"]
         out += [f"| {k} | {_fmt(v)} |" for k, v in r.items()]
     return "\n".join(out) + "\n"
+
+
+def _floor_section(report: dict, floor: dict) -> list[str]:
+    """The machine floor: the bare loop's own figures, and the 500 Hz loop beside them (machine_floor.py)."""
+    pre = floor.get("pre_send_us", floor.get("work_us"))
+    pinned = f", on CPU {floor['cpu']}" if floor.get("cpu") is not None else ""
+    out = ["", f"Machine floor (machine_floor.py): a bare {_fmt(floor['rate_hz'])} Hz loop in a fresh process, "
+           f"{_fmt(floor['work_us'])} µs of pure-Python work per period ({_fmt(pre)} µs of it before the noted send "
+           f"instant), SCHED_FIFO {'yes' if floor['realtime'] else 'no'}{pinned}, {_fmt(floor['seconds'])} s:", "",
+           "| deadline misses (missed / late) | lateness p50 / p99 / max µs | work wall p50 / p99 / max µs | "
+           "work thread CPU p50 / p99 / max µs | ticks whose work took over half a period | steal s |",
+           "|---:|---:|---:|---:|---:|---:|",
+           f"| {floor['deadline_misses']} ({floor['missed']} / {floor['late']}) | "
+           + " | ".join(" / ".join(_fmt(floor[k][q]) for q in ("p50", "p99", "max"))
+                        for k in ("lateness_us", "work_wall_us", "work_thread_cpu_us"))
+           + f" | {floor['ticks_over_half_period']} | {_fmt(floor['steal_s'])} |", ""]
+    if "send_jitter_us" not in floor:
+        return out
+
+    rows = [
+        ("deadline misses", _fmt(lookup(report, "loop.deadline_misses")), _fmt(floor["deadline_misses"])),
+        ("period jitter p50 / p99 µs (the daemon: torque bursts on the bus; the floor: its send instants)",
+         f"{_fmt(lookup(report, 'loop.jitter_p50_us'))} / {_fmt(lookup(report, 'loop.jitter_p99_us'))}",
+         f"{_fmt(floor['send_jitter_us']['p50'])} / {_fmt(floor['send_jitter_us']['p99'])}"),
+        ("wake-up lateness p99 µs", _fmt(lookup(report, "loop.daemon.lateness_p99_us")), _fmt(floor["lateness_us"]["p99"])),
+        ("tick start → send p50 / p99 µs",
+         f"{_fmt(lookup(report, 'loop.daemon.torque_out_p50_us'))} / {_fmt(lookup(report, 'loop.daemon.torque_out_p99_us'))}",
+         f"{_fmt(floor['pre_send_wall_us']['p50'])} / {_fmt(floor['pre_send_wall_us']['p99'])}"),
+        ("loop thread CPU per period p50 / p99 µs",
+         f"{_fmt(lookup(report, 'loop.daemon.loop_cpu_p50_us'))} / {_fmt(lookup(report, 'loop.daemon.loop_cpu_p99_us'))}",
+         f"{_fmt(floor['work_thread_cpu_us']['p50'])} / {_fmt(floor['work_thread_cpu_us']['p99'])}"),
+        (f"sensor → torque p99 µs (the floor: the sensor lead, {SENSOR_LEAD_US:g} µs, + deadline → send p99)",
+         _fmt(lookup(report, "latency.sensor_to_torque_us.p99")),
+         _fmt(floor["deadline_to_send_us"]["p99"] + SENSOR_LEAD_US)),
+    ]
+    out += ["The 500 Hz loop beside its floor (the floor ran right after it, with its amounts of work):", "",
+            "| figure | the daemon's loop | the bare loop |", "|---|---:|---:|"]
+    out += [f"| {name} | {ours} | {bare} |" for name, ours, bare in rows]
+    return out + [""]

@@ -17,6 +17,8 @@ timestamps over Zenoh and over a second udp_multicast port: the transport floors
   frames the tick had used and charged it the previous period's.)
 * operator → torque: the operator's y deflection alternates sign every command; the latency of a
   command is from its send time to the first torque burst whose sign follows it.
+* the drives' send jitter: |Δt − T| between the simulated drives' bursts of encoder estimates (500 Hz),
+  the other side of sensor → torque.
 * bus load: every frame seen on the bus in the window, worst-case stuffed (bus_load.py).
 * CPU: utime + stime of both processes from /proc/<pid>/stat over the window.
 """
@@ -49,13 +51,15 @@ SCENARIO = "paper_convex"
 OPERATOR_RATE = 100.0      # Hz, commands (each flips the deflection's sign)
 DEFLECTION = 0.2           # normalised y deflection: u_h = ±k_p·0.2 = ±4 N, the robot stays put
 PROBE_RATE = 500.0         # Hz, each transport probe
+DRIVES_RATE = 500.0        # Hz, the simulated drives' encoder estimates (paper_convex's [robot_sim] default)
 SETTLE = 2.5               # s after start before the window opens (arming, Zenoh links)
 
 SUMMARY = re.compile(
     r"(?P<ticks>\d+) ticks at (?P<rate>[\d.]+) Hz, (?P<missed>\d+) missed / (?P<late>\d+) late deadlines, "
     r"jitter p50 (?P<j50>[\d.]+) ms p99 (?P<j99>[\d.]+) ms max (?P<jmax>[\d.]+) ms, "
     r"compute p50 (?P<c50>[\d.]+) ms p99 (?P<c99>[\d.]+) ms, "
-    r"(?:torque out p50 (?P<o50>[\d.]+) ms p99 (?P<o99>[\d.]+) ms, )?CPU (?P<cpu>\d+)%"
+    r"(?:torque out p50 (?P<o50>[\d.]+) ms p99 (?P<o99>[\d.]+) ms, )?"
+    r"(?:loop thread CPU p50 (?P<l50>[\d.]+) ms p99 (?P<l99>[\d.]+) ms per period, )?CPU (?P<cpu>\d+)%"
 )
 
 
@@ -114,14 +118,26 @@ def _command(counter: int, session_id: str, sign: float) -> OperatorCommand:
     )
 
 
+def cpu_plan() -> dict:
+    """Which CPU each process gets: on a machine with two or more, the robot on the first and the controller's
+    loop on the last (its other threads kept off it); on one CPU, no pinning."""
+    cpus = sorted(os.sched_getaffinity(0))
+    if len(cpus) < 2:
+        return {}
+    return {"robot": cpus[0], "controller_loop": cpus[-1]}
+
+
 def run(rate_hz: float, seconds: float, log_dir: Path | None = None, probes: bool = True,
-        controller_args: tuple[str, ...] = ()) -> dict:
+        controller_args: tuple[str, ...] = (), pin: bool = True, robot_args: tuple[str, ...] = ()) -> dict:
     """Start the stack at `rate_hz` for `seconds` of measurement; returns the figures (see module doc)."""
     log_dir = Path(log_dir or tempfile.mkdtemp(prefix="sharedctl-bench-"))
     can_port, probe_port = children.free_udp_port(), children.free_udp_port()
     z_robot, z_ctrl, z_bench = (f"tcp/127.0.0.1:{zenoh_session.free_loopback_port()}" for _ in range(3))
     can_args = ["--can-interface", "udp_multicast", "--can-option", f"port={can_port}"]
     total = SETTLE + seconds + 0.5
+    cpus = cpu_plan() if pin else {}
+    robot_cpu = ["--cpu", str(cpus["robot"])] if cpus else []
+    controller_cpu = ["--cpu", str(cpus["controller_loop"])] if cpus else []
     started = []
     bus = probe_bus = session = None
     listener = probe_listener = None
@@ -134,12 +150,13 @@ def run(rate_hz: float, seconds: float, log_dir: Path | None = None, probes: boo
         listener.start()
         probe_listener.start()
         robot = children.start_child("robot", ["robot", "--scenario", SCENARIO, *can_args, "--zenoh-listen", z_robot,
-                                               "--robot-id", ROBOT_ID, "--duration", f"{total + 1.0:.1f}"], log_dir)
+                                               "--robot-id", ROBOT_ID, "--duration", f"{total + 1.0:.1f}", *robot_cpu, *robot_args], log_dir)
         started.append(robot)
         robot_priority = children.raise_priority(robot.popen.pid)
         controller = children.start_child("controller", [
             "controller", "--scenario", SCENARIO, *can_args, "--zenoh-listen", z_ctrl, "--robot-id", ROBOT_ID,
-            "--rate", f"{rate_hz:g}", "--duration", f"{total:.1f}", "--quiet", *controller_args], log_dir)
+            "--rate", f"{rate_hz:g}", "--duration", f"{total:.1f}", "--quiet", *controller_cpu, *controller_args],
+            log_dir)
         started.append(controller)
         for child, endpoint in ((robot, z_robot), (controller, z_ctrl)):
             if not children.wait_listening(endpoint, child, 20.0):
@@ -199,6 +216,7 @@ def run(rate_hz: float, seconds: float, log_dir: Path | None = None, probes: boo
         [f.t - unpack_time(f.data) for f in probe if window[0] <= f.t <= window[1]], 1e6)
     figures["processes"] = {c.name: c.report() for c in started}
     figures["robot_priority"] = robot_priority
+    figures["cpus"] = cpus
     figures["log_dir"] = str(log_dir)
     return figures
 
@@ -235,7 +253,16 @@ def _daemon_summary(controller: children.Child) -> dict:
             "lateness_max_us": float(g["jmax"]) * 1e3, "compute_p50_us": float(g["c50"]) * 1e3,
             "compute_p99_us": float(g["c99"]) * 1e3, "cpu_percent": int(g["cpu"]),
             "torque_out_p50_us": float(g["o50"]) * 1e3 if g["o50"] else None,
-            "torque_out_p99_us": float(g["o99"]) * 1e3 if g["o99"] else None}
+            "torque_out_p99_us": float(g["o99"]) * 1e3 if g["o99"] else None,
+            "loop_cpu_p50_us": float(g["l50"]) * 1e3 if g["l50"] else None,
+            "loop_cpu_p99_us": float(g["l99"]) * 1e3 if g["l99"] else None,
+            "sensor_waits": _int_after(r"waited for their wheel estimates (\d+)", controller.tail(40)),
+            "sensor_waits_in_vain": _int_after(r"waited for their wheel estimates \d+ \((\d+) in vain\)", controller.tail(40))}
+
+
+def _int_after(pattern: str, text: str) -> int | None:
+    match = re.search(pattern, text)
+    return int(match.group(1)) if match else None
 
 
 def _cpu(start, end) -> dict:
@@ -265,6 +292,8 @@ def analyse(frames: list[Frame], operator_log, window, rate_hz: float, summary: 
         "jitter_p99_us": percentiles(jitter, 1e6)["p99"],
         "jitter_p50_us": percentiles(jitter, 1e6)["p50"],
         "periods_without_torque_on_bus": missed_bus,
+        "drives_send_jitter_us": percentiles(period_jitter(group_bursts([f.t for f in encoder], 0.25 / DRIVES_RATE),
+                                                           1.0 / DRIVES_RATE), 1e6),
         "bursts": len(bursts),
         "daemon": summary,
     }

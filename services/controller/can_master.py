@@ -19,8 +19,9 @@ the codec, which counts it as bad); tests/services/test_controller_frame_layout.
 """
 from __future__ import annotations
 
+import statistics
 import time
-from collections import Counter
+from collections import Counter, deque
 from dataclasses import dataclass, field
 
 import can
@@ -34,6 +35,7 @@ from . import frame_layout
 from .encoder_check import EncoderCheck
 from .odometry import AxisEstimate
 
+ESTIMATE_INTERVALS = 9   # intervals between one axis's encoder frames kept for `estimate_interval`
 HOST_FRAMES = (
     cs.Estop, cs.SetAxisState, cs.SetControllerMode, cs.SetInputVel, cs.SetInputTorque, cs.SetLimits,
     cs.ClearErrors, cs.PollRequest,
@@ -50,6 +52,8 @@ class AxisStatus:
     heartbeat_at: float = float("-inf")        # s, when the last heartbeat arrived
     estimate: AxisEstimate | None = None
     positions_rejected_in_a_row: int = 0
+    estimate_frame_at: float | None = None      # s, arrival of the last encoder frame (accepted or not)
+    estimate_intervals: deque = field(default_factory=lambda: deque(maxlen=ESTIMATE_INTERVALS))
 
 
 @dataclass(frozen=True)
@@ -157,8 +161,9 @@ class CanMaster:
             self.send(cs.SetAxisState(n, AxisState.IDLE))
 
     # --------------------------------------------------------------- receive
-    def receive_until(self, deadline: float, max_frames: int = 2000) -> int:
-        """Read and handle frames until `deadline` (clock time), at most `max_frames`; returns how many were read."""
+    def receive_until(self, deadline: float, max_frames: int = 2000, stop_when=None) -> int:
+        """Read and handle frames until `deadline` (clock time), at most `max_frames`, or until `stop_when()` is
+        true after a frame; returns how many were read."""
         count = 0
         while count < max_frames:
             remaining = deadline - self.clock()
@@ -173,6 +178,8 @@ class CanMaster:
                 continue
             count += 1
             self.handle(msg, self.arrival_time(msg))
+            if stop_when is not None and stop_when():
+                return count
         return count
 
     def arrival_time(self, msg) -> float:
@@ -215,6 +222,9 @@ class CanMaster:
             self._heartbeat(axis, frame, now)
 
     def _encoder(self, axis: AxisStatus, pos: float, vel: float, now: float) -> None:
+        if axis.estimate_frame_at is not None and now > axis.estimate_frame_at:
+            axis.estimate_intervals.append(now - axis.estimate_frame_at)
+        axis.estimate_frame_at = now
         axis.estimate, reason = self.encoder_check.judge(axis.estimate, pos, vel, now, axis.positions_rejected_in_a_row)
         if reason is not None:
             self.implausible_estimates[reason] += 1
@@ -237,6 +247,23 @@ class CanMaster:
     # ---------------------------------------------------------------- status
     def estimates(self) -> list:
         return [self.axes[n].estimate for n in self.nodes]
+
+    def estimate_interval(self) -> float | None:
+        """The drives' encoder period as received: the median of the recent intervals between one axis's
+        frames, the slowest axis (None until every axis has sent two). A lost frame is one long interval."""
+        medians = []
+        for axis in self.axes.values():
+            if not axis.estimate_intervals:
+                return None
+            medians.append(statistics.median(axis.estimate_intervals))
+        return max(medians)
+
+    def estimates_since(self, since: float) -> bool:
+        """True when every axis has an estimate that arrived after `since` (clock time)."""
+        for axis in self.axes.values():
+            if axis.estimate is None or axis.estimate.received <= since:
+                return False
+        return True
 
     def faulted_axes(self) -> list[int]:
         """Axes that report an error or left closed loop (meaningful once armed)."""

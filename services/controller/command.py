@@ -5,13 +5,15 @@
                          [--zenoh-listen EP]… [--zenoh-connect EP]… [--robot-id ID]
                          [--rate 500] [--telemetry-rate 50] [--torque-limit 60] [--duration S]
                          [--feedback-timeout-ms 50] [--priority realtime|high|normal] [--quiet]
-                         [--[no-]sensor-sync] [--sensor-lead-us 250] [--spin-us 100]
+                         [--[no-]sensor-sync] [--sensor-lead-us 250] [--sensor-wait-us T/4] [--spin-us 100]
+                         [--cpu N]
                          [--lease implicit|explicit] [--lease-expiry-ms 1000] [--max-command-age-ms 500]
                          [--max-clock-skew-ms MS]
 """
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 
 from sharedctl.protocol.keys import check_robot_id
@@ -24,7 +26,7 @@ from ..lifecycle import StopFlag
 from ..service_config import add_argument as add_service_config_argument
 from ..scenario_files import load
 from .daemon import ControllerDaemon, DaemonConfig
-from .priority import LEVELS, make_loop_realtime, raise_nice
+from .priority import LEVELS, keep_off_cpu, make_loop_realtime, pin_to_cpu, raise_nice
 from ..recording.launch import add_argument as add_record_argument, open_process_recording, summary_line
 
 PROG = "sharedctl controller"
@@ -62,6 +64,12 @@ def add_parser(subparsers) -> None:
     p.add_argument("--spin-us", type=float, default=100.0,
                    help="poll the clock for this long before each deadline instead of sleeping (default 100; "
                         "0: plain sleep; costs at most this much CPU per tick)")
+    p.add_argument("--cpu", type=int, metavar="N",
+                   help="run the loop thread on CPU N alone and keep the process's other threads (Zenoh, CAN) off it "
+                        "(default: no pinning; docs/performance.md)")
+    p.add_argument("--sensor-wait-us", type=float,
+                   help="with --sensor-sync: a tick whose period's wheel estimates have not all arrived waits up to "
+                        "this long for them (default: a quarter of the period, 500 at 500 Hz; 0: never wait)")
     p.add_argument("--lease", choices=("implicit", "explicit"), default="implicit",
                    help="operator authority lease: implicit = a command while nobody holds control takes it "
                         "(default); explicit = only a take on the lease queryable (or in-band) grants control")
@@ -84,6 +92,12 @@ def run(args) -> int:
             raise ValueError("--rate, --telemetry-rate, --torque-limit and --feedback-timeout-ms must be positive")
         if not 0.0 <= args.spin_us < 1e6 / args.rate or not 0.0 <= args.sensor_lead_us < 1e6 / args.rate:
             raise ValueError("--spin-us and --sensor-lead-us must be ≥ 0 and shorter than the control period")
+        if args.sensor_wait_us is None:
+            args.sensor_wait_us = 0.25e6 / args.rate
+        if not 0.0 <= args.sensor_wait_us < 0.5e6 / args.rate:
+            raise ValueError("--sensor-wait-us must be ≥ 0 and shorter than half the control period")
+        if args.cpu is not None and args.cpu not in os.sched_getaffinity(0):
+            raise ValueError(f"--cpu {args.cpu}: this process may run on CPUs {sorted(os.sched_getaffinity(0))}")
         if not (args.lease_expiry_ms > 0 and args.max_command_age_ms > 0
                 and (args.max_clock_skew_ms is None or args.max_clock_skew_ms > 0)):
             raise ValueError("--lease-expiry-ms, --max-command-age-ms and --max-clock-skew-ms must be positive")
@@ -100,12 +114,15 @@ def run(args) -> int:
         robot_id=robot_id, rate=args.rate, telemetry_rate=args.telemetry_rate, torque_limit=args.torque_limit,
         feedback_timeout=args.feedback_timeout_ms / 1e3, duration=args.duration, verbose=not args.quiet,
         realtime=args.priority == "realtime", sensor_sync=args.sensor_sync, sensor_lead=args.sensor_lead_us / 1e6,
+        sensor_wait=args.sensor_wait_us / 1e6,
         spin=args.spin_us / 1e6, lease_mode=args.lease, lease_expiry=args.lease_expiry_ms / 1e3,
         max_command_age=args.max_command_age_ms / 1e3,
         max_clock_skew=None if args.max_clock_skew_ms is None else args.max_clock_skew_ms / 1e3,
     )
     bus = session = daemon = recording = None
     priority = raise_nice(args.priority)   # before Zenoh and CAN start their threads (they inherit it)
+    if args.cpu is not None:
+        priority += f", loop on CPU {args.cpu}, {keep_off_cpu(args.cpu)}"   # likewise inherited
     try:
         bus = can_bus.open_bus(spec)
         session = zenoh_config.open_configured(args.zenoh_config, listen, connect)
@@ -113,6 +130,8 @@ def run(args) -> int:
                                            session, spec)   # --record DIR: docs/recording.md
         daemon = ControllerDaemon(config, loop, q0, bus, session)
         daemon.realtime = config.realtime and make_loop_realtime()   # this thread runs the loop
+        if args.cpu is not None and not pin_to_cpu(args.cpu):
+            priority += f" (not pinned to CPU {args.cpu})"
         zenoh_desc = " ".join([f"listen {e}" for e in listen] + [f"connect {e}" for e in connect])
         print(
             f"{PROG}: robot {robot_id}, scenario {scenario.name}, controller {loop.controller.name}, "

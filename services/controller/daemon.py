@@ -10,8 +10,9 @@ Every control period (500 Hz by default, `RateClock`):
 then it reads CAN frames until just before the next tick, judging queued operator commands on
 the way. Timing (docs/performance.md): the next deadline is locked to `sensor_lead` after the
 wheel estimates arrive (phase.py, on by default); the last `spin` before it is polled rather than
-slept (`RateClock`); the Zenoh callback only queues a command's bytes, so no other thread holds
-the GIL or the policy lock for a decode while the loop waits for them; a warm-up step runs and
+slept (`RateClock`); a tick whose estimates are late waits for them, briefly (`sensor_wait`);
+operator commands wait in a Zenoh channel that the loop polls (command_intake.py: no Python
+callback thread, so none can hold the GIL when the loop wakes); a warm-up step runs and
 `gc.freeze()` is called before the clock starts. RobotState goes out at the telemetry
 rate, events when something changes (rate-limited), a Heartbeat message at 1 Hz and a
 liveliness token for as long as the daemon runs.
@@ -36,7 +37,6 @@ import math
 import sys
 import threading
 import time
-from collections import deque
 from dataclasses import dataclass
 
 import numpy as np
@@ -48,8 +48,9 @@ from sharedctl.protocol.wire_types import Dims
 from sharedctl.shared_controller import NonFiniteCommand, SharedController
 
 from ..lifecycle import RateClock
-from . import lease_queries
+from . import command_intake, lease_queries
 from .can_master import CanMaster
+from .command_intake import CommandIntake
 from .lease import DEFAULT_EXPIRY, LeaseMode, OperatorLease
 from .loop_summary import LatenessHistogram, Summary
 from .odometry import WheelOdometry, oldest_feedback_age
@@ -60,8 +61,7 @@ from .telemetry import EventLimiter, Link, robot_state
 from .wheel_kinematics import WheelKinematics
 
 ROLE = "controller"
-MAX_PENDING_COMMANDS = 1000   # operator payloads queued between two visits of the loop (~2 ms)
-RECEIVE_SLICE = 5e-4          # s: the loop applies queued operator commands at least this often between ticks
+RECEIVE_SLICE = 5e-4          # s: the loop takes and judges operator commands at least this often between ticks
 RECEIVE_MARGIN = 2e-4         # s: reading CAN frames stops this long before a deadline that is slept to
 
 
@@ -86,6 +86,7 @@ class DaemonConfig:
     realtime: bool = False              # the loop thread asks for SCHED_FIFO (priority.py)
     sensor_sync: bool = True            # lock the tick phase to the wheel estimates' arrival (phase.py)
     sensor_lead: float = 2.5e-4         # s after the estimates' arrival at which a synchronised tick starts
+    sensor_wait: float = 5e-4           # s a synchronised tick waits, at most, for its period's estimates (0: never)
     spin: float = 1e-4                  # s before each deadline polled instead of slept (lifecycle.RateClock)
     lease_mode: str = LeaseMode.IMPLICIT  # implicit: a command takes a free lease; explicit: only a take (lease.py)
     lease_expiry: float = DEFAULT_EXPIRY  # s without commands/takes from the holder → lease free
@@ -116,8 +117,6 @@ class ControllerDaemon:
         self.session = session
         self.events = EventLimiter(config.event_interval, ROLE)
         self.lock = threading.Lock()
-        self.pending_commands: deque = deque()   # (payload, monotonic, wall) from the Zenoh thread
-        self.commands_overflowed = 0             # payloads refused because the queue was full
         self.mode = Mode.ARMING
         self.period = 1.0 / config.rate
         self.q = np.asarray(q0, float).copy()
@@ -140,7 +139,11 @@ class ControllerDaemon:
         self.histogram = LatenessHistogram()     # tick lateness (jitter)
         self.compute = LatenessHistogram()       # tick compute time (control + telemetry)
         self.torque_out = LatenessHistogram()    # tick start → Set_Input_Torque frames handed to the bus
+        self.loop_cpu = LatenessHistogram()      # the loop thread's CPU time per period, outside the clock's wait
         self.late = 0
+        self.sensor_waits = 0                    # ticks that waited for their period's wheel estimates
+        self.sensor_wait_timeouts = 0            # … and started without them, after `sensor_wait`
+        self.last_tick_at: float | None = None
         self.realtime = False
         self.phase_lock = SensorPhaseLock(self.period, lead=config.sensor_lead) if config.sensor_sync else None
         self._declare(session)
@@ -152,34 +155,16 @@ class ControllerDaemon:
         self.event_pub = session.declare_publisher(keys.events_key(robot))
         self.alive_pub = session.declare_publisher(keys.alive_key(robot, ROLE))
         self.token = session.liveliness().declare_token(keys.alive_key(robot, ROLE))
-        self.subscriber = session.declare_subscriber(keys.operator_cmd_key(robot), self._on_command)
+        self.subscriber = session.declare_subscriber(keys.operator_cmd_key(robot), command_intake.channel())
+        self.intake = CommandIntake(self.subscriber, self.policy)
         self.queryable = session.declare_queryable(keys.lease_key(robot), self._on_lease_query)
 
-    def _on_command(self, sample) -> None:
-        """Zenoh callback thread: queue the payload with its arrival times; the loop thread judges it
-        (`apply_commands`). Only an append here: a callback thread that held the GIL or the policy
-        lock for a decode and was then preempted would stall the real-time loop thread behind it."""
-        try:
-            payload = sample.payload.to_bytes()
-        except Exception:  # noqa: BLE001
-            payload = b""
-        if len(self.pending_commands) >= MAX_PENDING_COMMANDS:
-            self.commands_overflowed += 1        # counted as a rejection by apply_commands
-            return
-        self.pending_commands.append((payload, time.monotonic(), time.time()))
-
     def apply_commands(self) -> None:
-        """Hand the queued operator payloads to the policy, in arrival order (caller holds `lock`).
+        """The operator commands that arrived, judged in arrival order (caller holds `lock`).
 
         Called by the loop between CAN frames and before each tick, and before a lease query is
         answered, so a take or release is judged after every command that arrived before it."""
-        pending = self.pending_commands
-        while pending:
-            payload, now, wall = pending.popleft()
-            self.policy.offer(payload, now, wall)
-        if self.commands_overflowed:
-            overflowed, self.commands_overflowed = self.commands_overflowed, 0
-            self.policy.rejections["command_queue_full"] += overflowed
+        self.intake.apply()
 
     def _on_lease_query(self, query) -> None:
         """Zenoh callback thread: take/release control (lease_queries.py); every query gets a reply."""
@@ -229,11 +214,14 @@ class ControllerDaemon:
         try:
             while not stop.stopped:
                 lateness = clock.wait()
+                cpu_at_tick = time.thread_time()
                 self.histogram.add(lateness)
                 if lateness > 0.5 * self.period:
                     self.late += 1
                 self.master.receive_until(0.0)    # whatever arrived while this process was not running
+                self.await_estimates()
                 now = time.monotonic()
+                self.last_tick_at = now
                 if config.duration is not None and now - t0 >= config.duration:
                     break
                 self.tick(now)
@@ -246,6 +234,7 @@ class ControllerDaemon:
                 if self.phase_lock is not None and (arrival := estimates_arrival(self.master.estimates())) is not None:
                     clock.next += self.phase_lock.correction(clock.next, arrival)
                 self.receive_until(clock.next - (config.spin if config.spin > 0 else RECEIVE_MARGIN))
+                self.loop_cpu.add(time.thread_time() - cpu_at_tick)
         finally:
             self.shutdown()
         elapsed = time.monotonic() - t0
@@ -257,6 +246,8 @@ class ControllerDaemon:
             cpu_percent=100.0 * cpu / elapsed if elapsed > 0 else 0.0,
             compute_p50_ms=self.compute.quantile(0.5) * 1e3, compute_p99_ms=self.compute.quantile(0.99) * 1e3,
             torque_out_p50_ms=self.torque_out.quantile(0.5) * 1e3, torque_out_p99_ms=self.torque_out.quantile(0.99) * 1e3,
+            loop_cpu_p50_ms=self.loop_cpu.quantile(0.5) * 1e3, loop_cpu_p99_ms=self.loop_cpu.quantile(0.99) * 1e3,
+            sensor_waits=self.sensor_waits, sensor_wait_timeouts=self.sensor_wait_timeouts,
             frames_rx=self.master.rx_frames,
             frames_tx=self.master.tx_frames, bad_frames=self.master.bad_frame_count,
             implausible_estimates=sum(self.master.implausible_estimates.values()),
@@ -282,14 +273,33 @@ class ControllerDaemon:
         except Exception:  # noqa: BLE001 — only a warm-up: the loop reports whatever this hit
             pass
 
+    def await_estimates(self) -> None:
+        """A synchronised tick in RUNNING mode whose period's wheel estimates have not all arrived yet (the
+        drives sent late) reads frames for up to `sensor_wait` until they have: otherwise it would control
+        with the previous period's, a period older. Only where the drives send once per control period
+        (their measured interval within 1.5 periods): a loop faster than its sensors has ticks without new
+        estimates by design. Counted in `sensor_waits` / `sensor_wait_timeouts`."""
+        since = self.last_tick_at
+        if self.phase_lock is None or self.config.sensor_wait <= 0 or since is None or self.mode is not Mode.RUNNING:
+            return
+        if self.master.estimates_since(since):
+            return
+        interval = self.master.estimate_interval()
+        if interval is None or interval > 1.5 * self.period:
+            return
+        self.sensor_waits += 1
+        self.master.receive_until(self.master.clock() + self.config.sensor_wait,
+                                  stop_when=lambda: self.master.estimates_since(since))
+        if not self.master.estimates_since(since):
+            self.sensor_wait_timeouts += 1
+
     def receive_until(self, deadline: float) -> None:
         """CAN frames until `deadline`, applying queued operator commands every `RECEIVE_SLICE` on the way
         (so that judging them rarely falls into the next tick)."""
         while True:
             self.master.receive_until(min(deadline, time.monotonic() + RECEIVE_SLICE))
-            if self.pending_commands:
-                with self.lock:
-                    self.apply_commands()
+            with self.lock:
+                self.apply_commands()
             if time.monotonic() >= deadline:
                 return
 

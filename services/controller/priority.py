@@ -8,6 +8,14 @@ Two steps, so that only the loop thread runs real-time:
   most of each period, and the kernel's RT throttling (sched_rt_runtime_us) still bounds an RT
   thread that would not.
 Both fall back quietly when the process may not raise its priority; what was obtained is reported.
+
+Optionally a CPU of its own for the loop (`--cpu N`), also in two steps:
+* `keep_off_cpu(n)` — before Zenoh and CAN start their threads: the process (and so every thread
+  created afterwards) may run on every allowed CPU but n;
+* `pin_to_cpu(n)` — in the loop thread: that thread runs on CPU n alone.
+The loop then finds its caches as it left them (between two ticks only its own frames and
+commands ran there), and no thread of its own process competes with it for that CPU. On a
+machine with one allowed CPU `keep_off_cpu` leaves the affinity as it is.
 """
 from __future__ import annotations
 
@@ -39,4 +47,28 @@ def make_loop_realtime() -> bool:
         os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(FIFO_PRIORITY))
         return True
     except (OSError, AttributeError):
+        return False
+
+
+def keep_off_cpu(cpu: int) -> str:
+    """The calling process's threads (and those it creates later) off `cpu`, if another CPU is allowed."""
+    try:
+        allowed = os.sched_getaffinity(0)
+        if cpu not in allowed:
+            raise ValueError(f"CPU {cpu} is not among the CPUs this process may use: {sorted(allowed)}")
+        others = allowed - {cpu}
+        if not others:
+            return f"CPU {cpu} is the only one allowed: shared"
+        os.sched_setaffinity(0, others)
+        return f"other threads on CPUs {','.join(map(str, sorted(others)))}"
+    except (OSError, AttributeError) as exc:
+        return f"affinity unchanged ({type(exc).__name__})"
+
+
+def pin_to_cpu(cpu: int) -> bool:
+    """The calling thread on `cpu` alone; False if not permitted or not available."""
+    try:
+        os.sched_setaffinity(0, {cpu})
+        return True
+    except (OSError, AttributeError, ValueError):
         return False

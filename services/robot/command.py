@@ -2,6 +2,7 @@
 
     sharedctl robot [--scenario FILE|NAME] [--can-interface I --can-channel C --can-option k=v ...]
                     [--zenoh-listen EP | --zenoh-connect EP] [--robot-id ID] [--duration S]
+                    [--spin-us 100] [--cpu N]
 
 Speaks CANSimple on the CAN bus (services/can_bus.py picks vcan0 or host-local udp_multicast),
 publishes GroundTruth on `sharedctl/v1/<robot>/truth` (100 Hz) and a liveliness token on
@@ -10,6 +11,7 @@ defaults (see plant.RobotSimConfig). SIGINT/SIGTERM: stops within 2 s, exit 0.
 """
 from __future__ import annotations
 
+import os
 import sys
 
 from sharedctl.models import OmniRobot
@@ -22,6 +24,7 @@ from ..security import zenoh_config
 from ..lifecycle import StopFlag
 from ..service_config import add_argument as add_service_config_argument
 from ..scenario_files import load
+from ..controller.priority import pin_to_cpu
 from .plant import RobotSimConfig, RobotSimConfigError
 from .process import CpuMeter, RobotProcess
 from .simulation import RobotSimulation
@@ -41,6 +44,10 @@ def add_parser(subparsers) -> None:
     zenoh_config.add_argument(p)
     p.add_argument("--robot-id", default="robot1", help="robot id in the Zenoh keys (default: robot1)")
     p.add_argument("--duration", type=float, metavar="S", help="stop after S seconds (default: run until SIGINT/SIGTERM)")
+    p.add_argument("--spin-us", type=float, default=100.0,
+                   help="poll the clock for this long before each physics tick instead of sleeping, so the drives "
+                        "send on time as a microcontroller's timer would (default 100; 0: plain sleep)")
+    p.add_argument("--cpu", type=int, metavar="N", help="run the whole process on CPU N (default: no pinning)")
     add_service_config_argument(p)
     p.set_defaults(handler=run)
 
@@ -75,6 +82,13 @@ def run(args) -> int:
         return _fail(str(exc))
     if args.duration is not None and not args.duration > 0:
         return _fail("--duration must be positive")
+    if not 0.0 <= args.spin_us * 1e-6 < sim.dt:
+        return _fail("--spin-us must be ≥ 0 and shorter than the physics period")
+    pinned = ""
+    if args.cpu is not None:   # before the bus and the session start their threads: they inherit it
+        if args.cpu not in os.sched_getaffinity(0) or not pin_to_cpu(args.cpu):
+            return _fail(f"--cpu {args.cpu}: this process may run on CPUs {sorted(os.sched_getaffinity(0))}")
+        pinned = f", on CPU {args.cpu}"
 
     try:
         bus = can_bus.open_bus(spec)
@@ -94,8 +108,8 @@ def run(args) -> int:
         endpoint = f"listen {listen[0]}" if listen else f"connect {connect[0]}" if connect else args.zenoh_config
         print(f"{PROG}: {robot_id} on CAN {spec.describe()}, Zenoh {endpoint}; physics {c.physics_rate_hz:g} Hz, "
               f"encoder {c.encoder_rate_hz:g} Hz, heartbeat {c.heartbeat_rate_hz:g} Hz, truth {c.truth_rate_hz:g} Hz, "
-              f"watchdog {c.watchdog_timeout:g} s", flush=True)
-        process.run(stop, args.duration)
+              f"watchdog {c.watchdog_timeout:g} s{pinned}", flush=True)
+        process.run(stop, args.duration, spin=args.spin_us * 1e-6)
     finally:
         if process is not None:
             process.close()

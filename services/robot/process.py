@@ -141,10 +141,11 @@ class RobotProcess:
         self.heartbeat_seq += 1
 
     # ----- loop ------------------------------------------------------------------
-    def run(self, stop: StopFlag, duration: float | None = None) -> None:
+    def run(self, stop: StopFlag, duration: float | None = None, spin: float = 0.0) -> None:
+        """The loop; `spin` (s) before each tick is polled rather than slept (lifecycle.RateClock)."""
         gc.collect()
         gc.freeze()          # start-up objects out of the collector's way: shorter pauses in the loop
-        clock = RateClock(self.sim.dt)
+        clock = RateClock(self.sim.dt, spin=spin)
         self.clock_start = clock.start
         self.wall_minus_monotonic = time.time() - time.monotonic()
         next_heartbeat = 0.0

@@ -23,3 +23,13 @@ def test_the_report_renders_the_floor_table():
     floor = machine_floor.measure(rate_hz=500.0, seconds=0.1, work_us=20.0)
     text = render({"quick": True, "machine": {}, "machine_floor": floor})
     assert "Machine floor" in text and f"| {floor['deadline_misses']} (" in text
+
+
+def test_the_send_instant_splits_the_work_and_gives_a_period_jitter():
+    floor = machine_floor.measure(rate_hz=500.0, seconds=0.2, work_us=60.0, pre_send_us=20.0)
+    assert floor["pre_send_us"] == 20.0 and floor["work_us"] == 60.0
+    # the noted instant lies inside the tick's work, so its time from the tick start never exceeds the work's
+    assert floor["pre_send_wall_us"]["max"] <= floor["work_wall_us"]["max"]
+    assert floor["send_jitter_us"]["p50"] >= 0.0
+    whole = machine_floor.measure(rate_hz=500.0, seconds=0.1, work_us=30.0)
+    assert whole["pre_send_us"] == 30.0     # by default the instant is at the end of the work

@@ -132,3 +132,21 @@ def test_arrival_time_uses_the_interface_receive_timestamp():
     assert master.arrival_time(msg) == 50.0
     msg.timestamp = 1000.5                        # from the future (clock mismatch): the time it was read
     assert master.arrival_time(msg) == 50.0
+
+
+def test_the_drives_encoder_period_is_the_median_interval_of_the_slowest_axis(master):
+    assert master.estimate_interval() is None
+    for k in range(6):
+        for n in (0, 1, 2):
+            if not (n == 2 and k == 3):            # one frame of axis 2 lost: one long interval
+                master.handle(message(cs.GetEncoderEstimates(n, 0.0, 0.0)), 1.0 + 0.002 * k + 1e-5 * n)
+    assert master.estimate_interval() == pytest.approx(0.002, abs=1e-9)
+    assert master.estimates_since(1.0095) and not master.estimates_since(1.0101)
+
+
+def test_receive_until_stops_as_soon_as_its_condition_holds(master):
+    for n in (0, 1, 2):
+        master.bus.queue.append(message(cs.GetEncoderEstimates(n, 0.0, 0.0)))
+    master.bus.queue.append(message(cs.Heartbeat(0, ODriveError.NONE, AxisState.IDLE)))
+    read = master.receive_until(master.clock() + 1.0, stop_when=lambda: master.estimates_since(0.0))
+    assert read == 3 and len(master.bus.queue) == 1

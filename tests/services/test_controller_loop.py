@@ -44,18 +44,28 @@ class Publisher:
         pass
 
 
+class Subscription(Publisher):
+    """A subscriber with a channel handler: `try_recv()` hands out what was put in `samples`, oldest first."""
+
+    def __init__(self, handler):
+        super().__init__()
+        self.handler, self.samples = handler, []
+
+    def try_recv(self):
+        return self.samples.pop(0) if self.samples else None
+
+
 class MemorySession:
     """declare_publisher / declare_subscriber / declare_queryable / liveliness().declare_token, kept in dicts."""
 
     def __init__(self):
-        self.publishers, self.callbacks = {}, {}
+        self.publishers, self.callbacks, self.subscriptions = {}, {}, {}
 
     def declare_publisher(self, key):
         return self.publishers.setdefault(key, Publisher())
 
-    def declare_subscriber(self, key, callback):
-        self.callbacks[key] = callback
-        return Publisher()
+    def declare_subscriber(self, key, handler):
+        return self.subscriptions.setdefault(key, Subscription(handler))
 
     def declare_queryable(self, key, callback):
         self.callbacks[key] = callback
@@ -208,3 +218,69 @@ def test_robot_state_is_published_with_the_link_health(daemon):
     assert state.u_h == pytest.approx((0.0, 5.0, 0.0)) and state.lease_holder == "op"
     assert state.link.staleness_ms == pytest.approx(2.0) and state.link.can_feedback_age_ms == pytest.approx(1.0)
     assert math.isclose(state.k_s, 1.0) and not state.estop_active
+
+
+class TimedBus(MemoryBus):
+    """recv() hands out queued (arrival time, message) pairs on the daemon's fake clock: waiting for one
+    moves the clock to its arrival; a timeout with nothing due moves it by the timeout."""
+
+    def __init__(self, daemon):
+        super().__init__()
+        self.daemon, self.queue = daemon, []
+
+    def recv(self, timeout=None):
+        now = self.daemon.clock_now
+        if self.queue and self.queue[0][0] <= now + (timeout or 0.0):
+            at, msg = self.queue.pop(0)
+            self.daemon.clock_now = max(now, at)
+            return msg
+        self.daemon.clock_now = now + (timeout or 0.0)
+        return None
+
+
+def running_with_drives_every(d, interval, periods=8):
+    """Armed, with encoder frames `interval` apart so far (the drives' measured period)."""
+    arm(d)
+    d.master.bus = TimedBus(d)
+    for k in range(periods):
+        feed(d, 10.0 - interval * (periods - k), heartbeat=False)
+    d.last_tick_at = 10.0 - 0.5 * interval      # the previous tick saw the last set
+    d.clock_now = 10.0
+
+
+def test_a_tick_whose_estimates_are_late_waits_for_them_and_no_longer(daemon):
+    running_with_drives_every(daemon, PERIOD)
+    for n in (0, 1, 2):
+        daemon.master.bus.queue.append((10.0003, message(cs.GetEncoderEstimates(n, 0.0, 0.0))))
+    daemon.await_estimates()
+    assert daemon.master.estimates_since(daemon.last_tick_at)
+    assert daemon.clock_now == pytest.approx(10.0003)
+    assert (daemon.sensor_waits, daemon.sensor_wait_timeouts) == (1, 0)
+    # estimates later than the wait: the tick goes on with the ones it has after `sensor_wait`
+    daemon.last_tick_at = daemon.clock_now
+    daemon.master.bus.queue.append((daemon.clock_now + 0.0009, message(cs.GetEncoderEstimates(0, 0.0, 0.0))))
+    start = daemon.clock_now
+    daemon.await_estimates()
+    assert daemon.clock_now - start == pytest.approx(daemon.config.sensor_wait)
+    assert (daemon.sensor_waits, daemon.sensor_wait_timeouts) == (2, 1)
+
+
+def test_no_wait_when_the_estimates_are_there_or_the_drives_send_slower_than_the_loop(daemon):
+    running_with_drives_every(daemon, PERIOD)
+    feed(daemon, 10.0, heartbeat=False)          # this period's set arrived before the tick
+    daemon.await_estimates()
+    assert daemon.sensor_waits == 0 and daemon.clock_now == 10.0
+    slow = ControllerDaemon(DaemonConfig(robot_id="unit", verbose=False, rate=1000.0), *load("paper_convex").closed_loop("ce")[:2],
+                            MemoryBus(), MemorySession())
+    slow.master.clock = lambda: slow.clock_now
+    slow.clock_now = 10.0
+    running_with_drives_every(slow, 2 * slow.period)   # 500 Hz drives, 1 kHz loop: every other tick has none
+    slow.await_estimates()
+    assert slow.sensor_waits == 0 and slow.clock_now == 10.0
+    free = ControllerDaemon(DaemonConfig(robot_id="unit", verbose=False, sensor_sync=False),
+                            *load("paper_convex").closed_loop("ce")[:2], MemoryBus(), MemorySession())
+    free.master.clock = lambda: free.clock_now
+    free.clock_now = 10.0
+    running_with_drives_every(free, PERIOD)
+    free.await_estimates()
+    assert free.sensor_waits == 0 and free.clock_now == 10.0

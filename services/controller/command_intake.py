@@ -1,0 +1,70 @@
+"""Operator commands from Zenoh to the operator policy: a channel the loop polls, a bounded queue, arrival order.
+
+No Python callback thread runs for operator commands. Zenoh holds their samples in a FIFO channel
+(`channel()`); the loop thread takes them (`take`) between CAN frames and before each tick, and
+hands them to the policy in arrival order (`apply`). A callback thread would need the GIL, and one
+preempted while holding it (on a busy CPU, behind a real-time thread) stalls the real-time loop
+behind it. The price: a command is stamped when taken, at most one receive slice of the loop
+(0.5 ms) after it arrived — well inside the policy's age limits (replay_guard.py).
+
+Whoever takes or applies holds the daemon's lock (the loop, or a lease query on a Zenoh thread), so
+two threads never interleave the order. A full queue refuses and counts (`command_queue_full`); a
+full channel holds the sender back inside Zenoh (nothing is dropped unseen). Neither fills while the
+loop runs: it empties both every 0.5 ms.
+"""
+from __future__ import annotations
+
+import time
+from collections import deque
+
+import zenoh
+
+MAX_PENDING = 1000        # payloads taken from the channel and not yet judged
+CHANNEL_CAPACITY = 1000   # samples Zenoh holds for the loop
+
+
+def channel():
+    """The handler to declare the operator-command subscriber with."""
+    return zenoh.handlers.FifoChannel(CHANNEL_CAPACITY)
+
+
+class CommandIntake:
+    """`subscriber.try_recv()` → (payload, monotonic, wall) queue → `policy.offer`, in arrival order."""
+
+    def __init__(self, subscriber, policy, clock=time.monotonic, wall_clock=time.time) -> None:
+        self.subscriber = subscriber
+        self.policy = policy
+        self.clock, self.wall_clock = clock, wall_clock
+        self.pending: deque = deque()
+        self.overflowed = 0                      # payloads refused because the queue was full
+
+    def take(self) -> None:
+        """Every sample waiting in the channel into the queue."""
+        for _ in range(CHANNEL_CAPACITY):
+            sample = self.subscriber.try_recv()
+            if sample is None:
+                return
+            self.queue(sample)
+
+    def queue(self, sample) -> None:
+        """One sample's payload with the times it was taken (an unreadable payload queues as empty bytes:
+        the policy refuses and counts it)."""
+        try:
+            payload = sample.payload.to_bytes()
+        except Exception:  # noqa: BLE001
+            payload = b""
+        if len(self.pending) >= MAX_PENDING:
+            self.overflowed += 1
+            return
+        self.pending.append((payload, self.clock(), self.wall_clock()))
+
+    def apply(self) -> None:
+        """Take what waits in the channel, then hand every queued payload to the policy in order."""
+        self.take()
+        pending = self.pending
+        while pending:
+            payload, now, wall = pending.popleft()
+            self.policy.offer(payload, now, wall)
+        if self.overflowed:
+            overflowed, self.overflowed = self.overflowed, 0
+            self.policy.rejections["command_queue_full"] += overflowed
