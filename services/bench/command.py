@@ -210,7 +210,7 @@ def table(report: dict):
     rows += ["loop.rate_hz", "loop.deadline_misses", "loop.jitter_p99_us", "loop_1khz.rate_hz",
              "loop_1khz.deadline_misses", "loop_1khz.jitter_p99_us", "loop_free_running.deadline_misses",
              "loop_free_running.jitter_p99_us", "loop_free_running.sensor_to_torque_us.p50",
-             "loop_free_running.sensor_to_torque_us.p99", "machine_floor.deadline_misses",
+             "loop_free_running.sensor_to_torque_us.p99", "loop.drives_send_jitter_us.p99", "machine_floor.deadline_misses",
              "machine_floor.send_jitter_us.p99", "machine_floor.deadline_to_send_us.p99",
              "machine_floor.lateness_us.p99", "machine_floor.work_wall_us.p99", "machine_floor.work_wall_us.max"]
     rows += [f"latency.{k}.{s}" for k in ("sensor_to_torque_us", "operator_to_torque_us", "zenoh_floor_us", "can_floor_us")

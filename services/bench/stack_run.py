@@ -12,7 +12,11 @@ timestamps over Zenoh and over a second udp_multicast port: the transport floors
 * sensor → torque: for each burst, the age of the wheel estimates the tick used: the oldest of
   the three axes' newest Get_Encoder_Estimates that arrived before the tick started — the burst
   minus the daemon's median "torque out" time (tick start → torque frames sent; its summary line),
-  since a frame arriving during the computation was not used. (The daemon's whole compute time,
+  since a frame arriving during the computation was not used. The daemon reports its own figure
+  beside it (`daemon.sensor_to_torque_*`: from the kernel arrival stamp of the oldest estimate a
+  tick used to its torque frames handed to the bus), exact about which estimates a tick used; the
+  bus figure is independent of the daemon but attributes a tick whose computation was much shorter
+  than the median to the previous period's estimates. (The daemon's whole compute time,
   used before it reported the send time, also counts the telemetry after the send: it cut off
   frames the tick had used and charged it the previous period's.)
 * operator → torque: the operator's y deflection alternates sign every command; the latency of a
@@ -59,6 +63,7 @@ SUMMARY = re.compile(
     r"jitter p50 (?P<j50>[\d.]+) ms p99 (?P<j99>[\d.]+) ms max (?P<jmax>[\d.]+) ms, "
     r"compute p50 (?P<c50>[\d.]+) ms p99 (?P<c99>[\d.]+) ms, "
     r"(?:torque out p50 (?P<o50>[\d.]+) ms p99 (?P<o99>[\d.]+) ms, )?"
+    r"(?:sensor to torque p50 (?P<s50>[\d.]+) ms p99 (?P<s99>[\d.]+) ms, )?"
     r"(?:loop thread CPU p50 (?P<l50>[\d.]+) ms p99 (?P<l99>[\d.]+) ms per period, )?CPU (?P<cpu>\d+)%"
 )
 
@@ -254,6 +259,8 @@ def _daemon_summary(controller: children.Child) -> dict:
             "compute_p99_us": float(g["c99"]) * 1e3, "cpu_percent": int(g["cpu"]),
             "torque_out_p50_us": float(g["o50"]) * 1e3 if g["o50"] else None,
             "torque_out_p99_us": float(g["o99"]) * 1e3 if g["o99"] else None,
+            "sensor_to_torque_p50_us": float(g["s50"]) * 1e3 if g["s50"] else None,
+            "sensor_to_torque_p99_us": float(g["s99"]) * 1e3 if g["s99"] else None,
             "loop_cpu_p50_us": float(g["l50"]) * 1e3 if g["l50"] else None,
             "loop_cpu_p99_us": float(g["l99"]) * 1e3 if g["l99"] else None,
             "sensor_waits": _int_after(r"waited for their wheel estimates (\d+)", controller.tail(40)),

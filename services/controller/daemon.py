@@ -139,6 +139,7 @@ class ControllerDaemon:
         self.histogram = LatenessHistogram()     # tick lateness (jitter)
         self.compute = LatenessHistogram()       # tick compute time (control + telemetry)
         self.torque_out = LatenessHistogram()    # tick start → Set_Input_Torque frames handed to the bus
+        self.sensor_to_torque = LatenessHistogram()   # arrival of the oldest estimate a tick used → its torque frames sent
         self.loop_cpu = LatenessHistogram()      # the loop thread's CPU time per period, outside the clock's wait
         self.late = 0
         self.sensor_waits = 0                    # ticks that waited for their period's wheel estimates
@@ -247,6 +248,8 @@ class ControllerDaemon:
             compute_p50_ms=self.compute.quantile(0.5) * 1e3, compute_p99_ms=self.compute.quantile(0.99) * 1e3,
             torque_out_p50_ms=self.torque_out.quantile(0.5) * 1e3, torque_out_p99_ms=self.torque_out.quantile(0.99) * 1e3,
             loop_cpu_p50_ms=self.loop_cpu.quantile(0.5) * 1e3, loop_cpu_p99_ms=self.loop_cpu.quantile(0.99) * 1e3,
+            sensor_to_torque_p50_ms=self.sensor_to_torque.quantile(0.5) * 1e3,
+            sensor_to_torque_p99_ms=self.sensor_to_torque.quantile(0.99) * 1e3,
             sensor_waits=self.sensor_waits, sensor_wait_timeouts=self.sensor_wait_timeouts,
             frames_rx=self.master.rx_frames,
             frames_tx=self.master.tx_frames, bad_frames=self.master.bad_frame_count,
@@ -383,7 +386,9 @@ class ControllerDaemon:
             self.saturated += 1
         self.out, self.u_s, self.tau = out, out.u_s, np.array(tau)
         self.master.send_torques(tau)
-        self.torque_out.add(time.monotonic() - now)
+        sent = time.monotonic()
+        self.torque_out.add(sent - now)
+        self.sensor_to_torque.add(sent - now + self.feedback_age)
         if out.set_class != self.last_set_class:
             if self.last_set_class is not None:
                 self.emit(now, "set", "set_transition", "info",

@@ -48,6 +48,8 @@ class Summary:
     compute_p99_ms: float = 0.0
     torque_out_p50_ms: float = 0.0
     torque_out_p99_ms: float = 0.0
+    sensor_to_torque_p50_ms: float = 0.0   # arrival of the oldest wheel estimate a tick used → its torque frames sent
+    sensor_to_torque_p99_ms: float = 0.0
     loop_cpu_p50_ms: float = 0.0       # the loop thread's CPU time per period outside the clock's wait
     loop_cpu_p99_ms: float = 0.0
     frames_rx: int = 0
@@ -70,7 +72,8 @@ class Summary:
             f"{self.missed} missed / {self.late} late deadlines, jitter p50 {self.jitter_p50_ms:.3f} ms "
             f"p99 {self.jitter_p99_ms:.3f} ms max {self.jitter_max_ms:.2f} ms, compute p50 {self.compute_p50_ms:.3f} ms "
             f"p99 {self.compute_p99_ms:.3f} ms, torque out p50 {self.torque_out_p50_ms:.3f} ms p99 "
-            f"{self.torque_out_p99_ms:.3f} ms, loop thread CPU p50 {self.loop_cpu_p50_ms:.3f} ms p99 {self.loop_cpu_p99_ms:.3f} ms "
+            f"{self.torque_out_p99_ms:.3f} ms, sensor to torque p50 {self.sensor_to_torque_p50_ms:.3f} ms p99 "
+            f"{self.sensor_to_torque_p99_ms:.3f} ms, loop thread CPU p50 {self.loop_cpu_p50_ms:.3f} ms p99 {self.loop_cpu_p99_ms:.3f} ms "
             f"per period, CPU {self.cpu_percent:.0f}% of one core; "
             f"CAN frames rx {self.frames_rx} tx {self.frames_tx} bad {self.bad_frames}, implausible encoder values "
             f"{self.implausible_estimates}; operator commands "

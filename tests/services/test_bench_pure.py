@@ -97,17 +97,18 @@ def test_the_daemon_summary_line_is_parsed_with_and_without_the_newer_figures():
 
     line = Summary(ticks=9000, elapsed=18.0, rate=500.0, missed=1, late=2, jitter_p50_ms=0.01, jitter_p99_ms=0.09,
                    jitter_max_ms=1.0, compute_p50_ms=0.36, compute_p99_ms=1.13, torque_out_p50_ms=0.34,
-                   torque_out_p99_ms=0.53, loop_cpu_p50_ms=0.81, loop_cpu_p99_ms=1.52, cpu_percent=43.0,
+                   torque_out_p99_ms=0.53, sensor_to_torque_p50_ms=0.61, sensor_to_torque_p99_ms=0.92,
+                   loop_cpu_p50_ms=0.81, loop_cpu_p99_ms=1.52, cpu_percent=43.0,
                    sensor_waits=12, sensor_wait_timeouts=3).line()
     g = SUMMARY.search(line).groupdict()
-    assert (g["missed"], g["late"], g["c50"], g["o50"], g["o99"], g["l50"], g["l99"], g["cpu"]) == (
-        "1", "2", "0.360", "0.340", "0.530", "0.810", "1.520", "43")
+    assert (g["missed"], g["late"], g["c50"], g["o50"], g["o99"], g["s50"], g["s99"], g["l50"], g["l99"], g["cpu"]) == (
+        "1", "2", "0.360", "0.340", "0.530", "0.610", "0.920", "0.810", "1.520", "43")
     assert _int_after(r"waited for their wheel estimates (\d+)", line) == 12
     assert _int_after(r"waited for their wheel estimates \d+ \((\d+) in vain\)", line) == 3
     older = line.replace(", torque out p50 0.340 ms p99 0.530 ms", "").replace(
-        ", loop thread CPU p50 0.810 ms p99 1.520 ms per period", "")
+        ", sensor to torque p50 0.610 ms p99 0.920 ms", "").replace(", loop thread CPU p50 0.810 ms p99 1.520 ms per period", "")
     g = SUMMARY.search(older).groupdict()
-    assert g["o50"] is None and g["l50"] is None and g["c99"] == "1.130" and g["cpu"] == "43"
+    assert g["o50"] is None and g["s50"] is None and g["l50"] is None and g["c99"] == "1.130" and g["cpu"] == "43"
 
 
 def test_estimates_that_arrived_after_the_tick_started_are_not_counted_as_used():

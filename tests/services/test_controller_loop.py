@@ -284,3 +284,16 @@ def test_no_wait_when_the_estimates_are_there_or_the_drives_send_slower_than_the
     running_with_drives_every(free, PERIOD)
     free.await_estimates()
     assert free.sensor_waits == 0 and free.clock_now == 10.0
+
+
+def test_sensor_to_torque_runs_from_the_oldest_estimate_used_to_the_torque_frames(daemon):
+    import time
+
+    arm(daemon)
+    start = time.monotonic()
+    feed(daemon, start - 0.0008, heartbeat=False)       # estimates that arrived 0.8 ms before the tick
+    daemon.clock_now = start
+    daemon.tick(start)
+    assert daemon.sensor_to_torque.n == 1 and daemon.torque_out.n == 1
+    age = daemon.sensor_to_torque.quantile(0.5)
+    assert 0.0008 <= age <= 0.0008 + daemon.torque_out.quantile(0.5) + 1e-5
