@@ -7,8 +7,10 @@ Every control period (500 Hz by default, `RateClock`):
   4. τ = B(ψ)⁻¹ u_s (`OmniRobot.wheel_torques`, in closed form: wheel_kinematics.py), scaled down
      uniformly so that max|τ_j| ≤ the torque limit (the direction of u_s is kept), Set_Input_Torque
      to every axis                                                         (can_master.py)
-then it reads CAN frames until just before the next tick, judging queued operator commands on
-the way. Timing (docs/performance.md): the next deadline is locked to `sensor_lead` after the
+then it reads CAN frames until `RECEIVE_MARGIN` before the clock's final spin, judging queued
+operator commands on the way (frames of the last stretch, often the wheel estimates, are read at
+the tick's start: reading them right up to the deadline let a slow stretch of the machine push
+the reading past it). Timing (docs/performance.md): the next deadline is locked to `sensor_lead` after the
 wheel estimates arrive (phase.py, on by default); the last `spin` before it is polled rather than
 slept (`RateClock`); a tick whose estimates are late waits for them, briefly (`sensor_wait`);
 operator commands wait in a Zenoh channel that the loop polls (command_intake.py: no Python
@@ -62,7 +64,7 @@ from .wheel_kinematics import WheelKinematics
 
 ROLE = "controller"
 RECEIVE_SLICE = 5e-4          # s: the loop takes and judges operator commands at least this often between ticks
-RECEIVE_MARGIN = 2e-4         # s: reading CAN frames stops this long before a deadline that is slept to
+RECEIVE_MARGIN = 2e-4         # s: reading CAN frames stops this long before the clock's final spin (the rest: next tick)
 
 
 class Mode(enum.Enum):
@@ -234,7 +236,7 @@ class ControllerDaemon:
                 self.compute.add(time.monotonic() - now)
                 if self.phase_lock is not None and (arrival := estimates_arrival(self.master.estimates())) is not None:
                     clock.next += self.phase_lock.correction(clock.next, arrival)
-                self.receive_until(clock.next - (config.spin if config.spin > 0 else RECEIVE_MARGIN))
+                self.receive_until(clock.next - config.spin - RECEIVE_MARGIN)
                 self.loop_cpu.add(time.thread_time() - cpu_at_tick)
         finally:
             self.shutdown()
