@@ -13,9 +13,10 @@ Optionally a CPU of its own for the loop (`--cpu N`), also in two steps:
 * `keep_off_cpu(n)` — before Zenoh and CAN start their threads: the process (and so every thread
   created afterwards) may run on every allowed CPU but n;
 * `pin_to_cpu(n)` — in the loop thread: that thread runs on CPU n alone.
-The loop then finds its caches as it left them (between two ticks only its own frames and
-commands ran there), and no thread of its own process competes with it for that CPU. On a
-machine with one allowed CPU `keep_off_cpu` leaves the affinity as it is.
+No thread of its own process then competes with the loop for that CPU, and it finds more of its
+caches as it left them (other processes may still run there unless they are placed elsewhere
+too: the bench puts the simulated robot on another CPU). On a machine with one allowed CPU
+`keep_off_cpu` leaves the affinity as it is.
 """
 from __future__ import annotations
 
