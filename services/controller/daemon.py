@@ -221,7 +221,7 @@ class ControllerDaemon:
                 self.histogram.add(lateness)
                 if lateness > 0.5 * self.period:
                     self.late += 1
-                self.master.receive_until(0.0)    # whatever arrived while this process was not running
+                self.master.receive_until(0.0)    # what arrived during the margin and the spin (or a stall)
                 self.await_estimates()
                 now = time.monotonic()
                 self.last_tick_at = now
