@@ -29,7 +29,7 @@ import time
 from pathlib import Path
 
 from . import control_step, machine_floor, stack_run
-from .markdown import SENSOR_LEAD_US, lookup
+from .markdown import lookup
 
 FLOOR_WORK_US = 400.0   # µs of CPU per period in the machine-floor loop if the daemon's own figures are missing
 
@@ -173,7 +173,7 @@ def ratios(report: dict) -> dict:
                                                            "machine_floor.pre_send_wall_us.p99"),
         "sensor_to_torque_over_machine_floor_p99": _over_values(
             lookup(report, "latency.sensor_to_torque_us.p99"),
-            SENSOR_LEAD_US + (lookup(report, "machine_floor.deadline_to_send_us.p99") or math.nan)),
+            stack_run.SENSOR_LEAD_US + (lookup(report, "machine_floor.deadline_to_send_us.p99") or math.nan)),
         "loop_1khz_rate_over_target": (lookup(report, "loop_1khz.rate_hz") or math.nan) / 1000.0,
     }
 

@@ -65,7 +65,7 @@ def _loop(rate_hz: float, seconds: float, work_us: float, spin: float, pre_send_
           cpu: int | None) -> dict:
     realtime = make_loop_realtime()
     pinned = cpu is not None and pin_to_cpu(cpu)
-    pre_us = min(work_us, work_us if pre_send_us is None else pre_send_us)
+    pre_us = work_us if pre_send_us is None else min(pre_send_us, work_us)
     pre = _calibrate(pre_us)
     post = _calibrate(work_us - pre_us) if work_us - pre_us >= 1.0 else 0
     period = 1.0 / rate_hz

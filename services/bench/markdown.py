@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import math
 
-SENSOR_LEAD_US = 250.0   # the daemon's default --sensor-lead-us (services/controller/command.py)
+from .stack_run import SENSOR_LEAD_US
 
 
 def _fmt(value, digits: int = 3) -> str:
@@ -67,8 +67,9 @@ def render(report: dict) -> str:
     runs = ("loop", "loop_1khz", third)
     for key in ("rate_hz", "deadline_misses", "jitter_p50_us", "jitter_p99_us", "periods_without_torque_on_bus"):
         out.append(f"| loop {key} | " + " | ".join(_fmt(lookup(report, f"{r}.{key}")) for r in runs) + " |")
-    for key in ("missed", "late", "estops", "lateness_p99_us", "compute_p50_us", "compute_p99_us", "torque_out_p50_us",
-                "torque_out_p99_us", "sensor_to_torque_p50_us", "sensor_to_torque_p99_us", "loop_cpu_p50_us", "loop_cpu_p99_us", "sensor_waits", "sensor_waits_in_vain"):
+    for key in ("missed", "late", "estops", "lateness_p99_us", "compute_p50_us", "compute_p99_us",
+                "torque_out_p50_us", "torque_out_p99_us", "sensor_to_torque_p50_us", "sensor_to_torque_p99_us",
+                "loop_cpu_p50_us", "loop_cpu_p99_us", "sensor_waits", "sensor_waits_in_vain"):
         out.append(f"| daemon {key} | " + " | ".join(_fmt(lookup(report, f"{r}.daemon.{key}")) for r in runs) + " |")
     out.append("| the drives' send jitter p50 / p99 µs | " + " | ".join(
         f"{_fmt(lookup(report, f'{r}.drives_send_jitter_us.p50'))} / {_fmt(lookup(report, f'{r}.drives_send_jitter_us.p99'))}"

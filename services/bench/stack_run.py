@@ -56,6 +56,7 @@ OPERATOR_RATE = 100.0      # Hz, commands (each flips the deflection's sign)
 DEFLECTION = 0.2           # normalised y deflection: u_h = ±k_p·0.2 = ±4 N, the robot stays put
 PROBE_RATE = 500.0         # Hz, each transport probe
 DRIVES_RATE = 500.0        # Hz, the simulated drives' encoder estimates (paper_convex's [robot_sim] default)
+SENSOR_LEAD_US = 250.0     # the controller's sensor lead (its default), passed explicitly: the floor's figures use it
 SETTLE = 2.5               # s after start before the window opens (arming, Zenoh links)
 
 SUMMARY = re.compile(
@@ -133,7 +134,7 @@ def cpu_plan() -> dict:
 
 
 def run(rate_hz: float, seconds: float, log_dir: Path | None = None, probes: bool = True,
-        controller_args: tuple[str, ...] = (), pin: bool = True, robot_args: tuple[str, ...] = ()) -> dict:
+        controller_args: tuple[str, ...] = (), pin: bool = True) -> dict:
     """Start the stack at `rate_hz` for `seconds` of measurement; returns the figures (see module doc)."""
     log_dir = Path(log_dir or tempfile.mkdtemp(prefix="sharedctl-bench-"))
     can_port, probe_port = children.free_udp_port(), children.free_udp_port()
@@ -155,13 +156,13 @@ def run(rate_hz: float, seconds: float, log_dir: Path | None = None, probes: boo
         listener.start()
         probe_listener.start()
         robot = children.start_child("robot", ["robot", "--scenario", SCENARIO, *can_args, "--zenoh-listen", z_robot,
-                                               "--robot-id", ROBOT_ID, "--duration", f"{total + 1.0:.1f}", *robot_cpu, *robot_args], log_dir)
+                                               "--robot-id", ROBOT_ID, "--duration", f"{total + 1.0:.1f}", *robot_cpu], log_dir)
         started.append(robot)
         robot_priority = children.raise_priority(robot.popen.pid)
         controller = children.start_child("controller", [
             "controller", "--scenario", SCENARIO, *can_args, "--zenoh-listen", z_ctrl, "--robot-id", ROBOT_ID,
-            "--rate", f"{rate_hz:g}", "--duration", f"{total:.1f}", "--quiet", *controller_cpu, *controller_args],
-            log_dir)
+            "--rate", f"{rate_hz:g}", "--duration", f"{total:.1f}", "--quiet", "--sensor-lead-us", f"{SENSOR_LEAD_US:g}",
+            *controller_cpu, *controller_args], log_dir)
         started.append(controller)
         for child, endpoint in ((robot, z_robot), (controller, z_ctrl)):
             if not children.wait_listening(endpoint, child, 20.0):
@@ -247,12 +248,12 @@ def _start_probe(name: str, argv: list[str], log_dir: Path) -> children.Child:
 
 
 def _daemon_summary(controller: children.Child) -> dict:
-    match = SUMMARY.search(controller.tail(40))
+    tail = controller.tail(40)
+    match = SUMMARY.search(tail)
     if not match:
         return {}
     g = match.groupdict()
-    estops = re.search(r"estops (\d+)", controller.tail(40))
-    return {"estops": int(estops.group(1)) if estops else None, "ticks": int(g["ticks"]),
+    return {"estops": _int_after(r"estops (\d+)", tail), "ticks": int(g["ticks"]),
             "rate_hz": float(g["rate"]), "missed": int(g["missed"]), "late": int(g["late"]),
             "lateness_p50_us": float(g["j50"]) * 1e3, "lateness_p99_us": float(g["j99"]) * 1e3,
             "lateness_max_us": float(g["jmax"]) * 1e3, "compute_p50_us": float(g["c50"]) * 1e3,
@@ -263,8 +264,8 @@ def _daemon_summary(controller: children.Child) -> dict:
             "sensor_to_torque_p99_us": float(g["s99"]) * 1e3 if g["s99"] else None,
             "loop_cpu_p50_us": float(g["l50"]) * 1e3 if g["l50"] else None,
             "loop_cpu_p99_us": float(g["l99"]) * 1e3 if g["l99"] else None,
-            "sensor_waits": _int_after(r"waited for their wheel estimates (\d+)", controller.tail(40)),
-            "sensor_waits_in_vain": _int_after(r"waited for their wheel estimates \d+ \((\d+) in vain\)", controller.tail(40))}
+            "sensor_waits": _int_after(r"waited for their wheel estimates (\d+)", tail),
+            "sensor_waits_in_vain": _int_after(r"waited for their wheel estimates \d+ \((\d+) in vain\)", tail)}
 
 
 def _int_after(pattern: str, text: str) -> int | None:
