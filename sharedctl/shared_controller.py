@@ -12,6 +12,7 @@ immutable, so the daemon, a test and a replay all run the same code.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from functools import cached_property
 
 import numpy as np
 
@@ -54,10 +55,18 @@ class StepOutput:
     role: LawRole
     k_h: float
     k_f: float
-    q_r: np.ndarray          # projected reference (active group, or the one the machine would pick)
+    reference: "np.ndarray | _PickedReference" = field(repr=False, compare=False)   # q_r, or how to find it
     theta_estimate: np.ndarray
     v_used: np.ndarray       # q̇ (state feedback) or the observer's v̂ (output feedback)
     region_margins: np.ndarray
+
+    @cached_property
+    def q_r(self) -> np.ndarray:
+        """The projected reference: the active group's, or, while the operator has authority, that of
+        the group the machine would pick (NaN if none applies). The latter is worked out on first read
+        (every group's projection: half an operator-only step, which the daemon needs only for its
+        telemetry) from the step's own inputs."""
+        return self.reference.q_r() if isinstance(self.reference, _PickedReference) else self.reference
 
 
 @dataclass
@@ -84,7 +93,8 @@ class SharedController:
         they are built (stacked rows, gain vectors, parameter box); the per-sample arithmetic —
         the rows of Definition 2, the active group's (6)–(11), the laws — runs on Python floats
         (short_vectors), with numpy arrays only at the interface; every group's evaluation for
-        (46)'s selection is made only when a group is to be selected (_EveryGroupOnDemand).
+        (46)'s selection is made only when a group is to be selected (_EveryGroupOnDemand), and for
+        the reference reported while the operator has authority only when it is read (StepOutput.q_r).
         tests/test_shared_step_reference.py holds it to recorded outputs.
         """
         model, feasible, machine = self.model, self.feasible, self.machine
@@ -94,7 +104,8 @@ class SharedController:
         intent = 0.0 if mode is Mode.MACHINE else operator.intent
         q_list, v_list = floats(q), v_used.tolist()
         rows = feasible.row_values(q_list, v_list)
-        every_group = _EveryGroupOnDemand(feasible, q, v_used, operator.desired, self.reference, machine.tracking.lam)
+        every_group = _EveryGroupOnDemand(feasible, np.array(q_list), np.array(v_list), operator.desired, self.reference,
+                                          machine.tracking.lam)
         arbiter, decision = arbitrate(feasible, self.sharing, state.arbiter, q, v_used, intent, dt,
                                       every_group.lyapunov, every_group, rows)
 
@@ -131,15 +142,11 @@ class SharedController:
         u_s = shared_input(decision, u_h, u_f)
 
         observer_next = state.observer + dt * observer.derivative(q, state.observer) if observer else state.observer
-        if engaged:
-            q_r = np.array(c.floats.q_r)       # the active group's projected reference
-        else:
-            ref_group = select_group(feasible, decision.situation, every_group.lyapunov, every_group)
-            q_r = every_group.q_r[ref_group] if ref_group is not None else np.full(model.n, np.nan)
+        reference = np.array(c.floats.q_r) if engaged else _PickedReference(feasible, decision.situation, every_group)
         estimate = machine.law(law_role).estimate(theta_next, law_next) if law_role is not None else theta_next
         output = StepOutput(
             u_s=u_s, u_h=u_h, u_f=u_f, authority=decision.authority, set_class=decision.situation.overall,
-            group=decision.group, role=decision.role, k_h=decision.k_h, k_f=decision.k_f, q_r=q_r,
+            group=decision.group, role=decision.role, k_h=decision.k_h, k_f=decision.k_f, reference=reference,
             theta_estimate=estimate, v_used=v_used, region_margins=feasible.region_margins(q, rows[0]),
         )
         next_state = ControllerState(arbiter, theta_next, law_role, law_next, observer_next)   # every field
@@ -187,6 +194,19 @@ class _EveryGroupOnDemand:
         if self._values is None:
             self._evaluate()
         return self._feasible.point_inside_group_region(g, self._q_r_floats[g])
+
+
+@dataclass(frozen=True)
+class _PickedReference:
+    """The projected reference of the group select_group would pick in this sample (StepOutput.q_r)."""
+
+    feasible: FeasibleSet
+    situation: object
+    every_group: _EveryGroupOnDemand
+
+    def q_r(self) -> np.ndarray:
+        g = select_group(self.feasible, self.situation, self.every_group.lyapunov, self.every_group)
+        return self.every_group.q_r[g].copy() if g is not None else np.full(self.feasible.n, np.nan)
 
 
 class NonFiniteCommand(ArithmeticError):

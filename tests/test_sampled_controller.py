@@ -56,3 +56,29 @@ def test_step_is_a_pure_function_of_its_state():
     b_state, b_out = ctrl.step(state, q0, v, op, PERIOD)
     assert np.array_equal(a_out.u_s, b_out.u_s)
     assert np.array_equal(a_state.theta_hat, b_state.theta_hat)
+
+
+@pytest.mark.parametrize("name", ["paper_convex", "paper_nonconvex"])
+def test_the_reference_reported_under_operator_authority_is_its_own_samples(name):
+    """While the operator has authority, StepOutput.q_r (the group the machine would pick) is worked out
+    when first read. It must be that of the sample's own (q, q̇), even when the caller has overwritten
+    its q and q̇ arrays in place since (as a loop reusing its buffers does). Random states: for most of
+    them the pick at the overwritten state would be another group's."""
+    loop, q0, _ = load(name).closed_loop("ce")
+    controller = SharedController(loop.model, loop.feasible, loop.controller, loop.sharing, loop.reference)
+    state = controller.initial_state(q0, loop.theta_hat0)
+    rng = np.random.default_rng(7)
+    low, high = np.array([-3.0, -3.0, -0.5]), np.array([3.0, 3.0, 0.5])
+    checked = 0
+    for _ in range(200):
+        q, v = rng.uniform(low, high), rng.uniform(-1.0, 1.0, 3)
+        operator = OperatorInput(Desired(rng.uniform(low, high), np.zeros(3), np.zeros(3)), np.zeros(3), 0.0)
+        q_buffer, v_buffer = q.copy(), v.copy()
+        _, out = controller.step(state, q_buffer, v_buffer, operator, PERIOD)
+        if out.authority.name != "HUMAN":
+            continue
+        _, fresh = controller.step(state, q.copy(), v.copy(), operator, PERIOD)
+        q_buffer[:], v_buffer[:] = rng.uniform(low, high), rng.uniform(-2.0, 2.0, 3)
+        np.testing.assert_array_equal(out.q_r, fresh.q_r)
+        checked += 1
+    assert checked >= 50

@@ -4,11 +4,13 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
+from sharedctl.protocol.errors import NonFiniteValue
 from sharedctl.protocol.messages import RobotState
 from sharedctl.protocol.msgpack_codec import decode_message, encode_message
 from sharedctl.protocol.wire_types import ROBOT_DIMS
 from sharedctl.services.controller.telemetry import EventLimiter, Link, robot_state
 from sharedctl.services.scenario_files import load
+from sharedctl.sets import classify_rows
 from sharedctl.shared_controller import OperatorInput, SharedController
 from sharedctl.sharing import Authority
 from sharedctl.transform import Desired
@@ -60,7 +62,7 @@ def test_human_authority_has_k_s_one(stepped):
 
 def test_a_missing_projected_reference_falls_back_to_the_pose_and_never_is_inf(stepped):
     loop, q, v, out = stepped
-    msg = build(loop, q, v, replace(out, q_r=np.full(3, np.nan)), link=Link(0.0, 0.0, float("inf"), float("inf")))
+    msg = build(loop, q, v, replace(out, reference=np.full(3, np.nan)), link=Link(0.0, 0.0, float("inf"), float("inf")))
     np.testing.assert_allclose(msg.q_ref, q)
     encode_message(msg, ROBOT_DIMS)
     assert msg.link.staleness_ms == 1e9
@@ -71,6 +73,51 @@ def test_before_the_first_step_the_state_reports_the_operator_in_charge_and_thet
     msg = build(loop, q, v, None, u_s=np.zeros(3), wheel_torques=np.zeros(3), theta_hat=np.zeros(3))
     encode_message(msg, ROBOT_DIMS)
     assert msg.authority.value == "human" and msg.theta_hat == (0.0, 0.0, 0.0)
+
+
+def classify_rows_per_group(loop, q, v):
+    with np.errstate(invalid="ignore"):
+        return tuple(classify_rows(g.values(q), g.K @ v, loop.sharing.bands).name for g in loop.feasible.groups)
+
+
+def before_the_first_step(loop, q, v, **kw):
+    return build(loop, q, v, None, u_s=np.zeros(3), wheel_torques=np.zeros(3), theta_hat=np.zeros(3), **kw)
+
+
+@pytest.mark.parametrize("name", ["paper_convex", "paper_nonconvex"])
+def test_group_classes_and_margins_are_classify_rows_and_the_feasible_sets_margins(name):
+    loop = load(name).closed_loop("ce")[0]
+    q, v = np.array([-0.2, 0.1, 0.4]), np.array([0.7, 0.5, -0.2])
+    msg = before_the_first_step(loop, q, v)
+    assert tuple(c.name for c in msg.group_classes) == classify_rows_per_group(loop, q, v)
+    assert msg.min_margin == loop.feasible.margin(q) == max(msg.region_margins)
+    assert msg.region_margins == tuple(loop.feasible.region_margins(q).tolist())
+
+
+def test_margins_far_outside_the_set_are_clipped_to_minus_1e12(stepped):
+    loop, _, v, _ = stepped
+    msg = before_the_first_step(loop, np.array([-1.0e13, 3.0, 0.0]), v)
+    assert msg.min_margin == -1.0e12 and msg.region_margins == (-1.0e12,)
+
+
+def test_a_non_finite_pose_is_refused_for_its_margin(stepped):
+    loop, _, v, out = stepped
+    with pytest.raises(NonFiniteValue, match="min_margin"):
+        build(loop, np.array([-0.9, np.nan, 0.0]), v, out)
+
+
+def test_a_non_finite_velocity_is_sent_as_zero_with_the_classes_classify_rows_gives_it(stepped):
+    loop, q, _, _ = stepped
+    v = np.array([0.0, np.inf, 0.0])
+    msg = before_the_first_step(loop, q, v)
+    assert msg.qd_hat == (0.0, 0.0, 0.0)
+    assert tuple(c.name for c in msg.group_classes) == classify_rows_per_group(loop, q, v)
+
+
+def test_a_pose_of_the_wrong_length_is_refused(stepped):
+    loop, _, v, _ = stepped
+    with pytest.raises(ValueError):
+        before_the_first_step(loop, np.array([-0.9, 3.0]), v)
 
 
 def test_events_of_one_topic_are_rate_limited_and_the_suppressed_count_reported():
