@@ -10,6 +10,8 @@
 * Commands: Set_Input_Torque per axis, Estop to all axes, IDLE to all axes.
 * Receive path: the frames this side sends (Set_*, Estop, Clear_Errors, RTR polls) come back
   on udp_multicast and are ignored; a frame the codec refuses is counted and skipped.
+* Frames go through a port (services/can_ports.py): on udp_multicast it reads and writes the
+  bus's socket directly, python-can's datagrams without python-can's per-frame `Message`.
 
 Frames are built and read with `sharedctl.protocol.cansimple`, except on the two paths that run
 every period (frame_layout.py): Set_Input_Torque is packed, and Get_Encoder_Estimates and the
@@ -31,6 +33,7 @@ from sharedctl.protocol.canframe import DEFAULT_WHEEL_NODES
 from sharedctl.protocol.errors import ProtocolError
 from sharedctl.protocol.odrive_enums import AxisState, ControlMode, InputMode, ODriveError
 
+from ..can_ports import port_for
 from . import frame_layout
 from .encoder_check import EncoderCheck
 from .odometry import AxisEstimate
@@ -87,8 +90,13 @@ class CanMaster:
 
     def __post_init__(self) -> None:
         self.axes = {n: AxisStatus(n) for n in self.nodes}
+        self.port = port_for(self.bus)
         self._torque_ids = {n: frame_layout.torque_id(n) for n in self.nodes}
         self._node_ids = frozenset(self.nodes)
+
+    def use_bus(self, bus) -> None:
+        """Read and write another bus from now on."""
+        self.bus, self.port = bus, port_for(bus)
 
     # ------------------------------------------------------------------ send
     def send(self, message) -> bool:
@@ -96,12 +104,8 @@ class CanMaster:
         return self._send_frame(frame.arbitration_id, frame.data, frame.is_remote, frame.dlc)
 
     def _send_frame(self, arbitration_id: int, data: bytes, remote: bool = False, dlc: int | None = None) -> bool:
-        msg = can.Message(
-            arbitration_id=arbitration_id, data=data, is_remote_frame=remote,
-            dlc=len(data) if dlc is None else dlc, is_extended_id=False,
-        )
         try:
-            self.bus.send(msg, timeout=0.01)
+            self.port.send(arbitration_id, remote, len(data) if dlc is None else dlc, data, timeout=0.01)
         except (can.CanError, OSError) as exc:
             self.tx_errors[type(exc).__name__] += 1
             return False
@@ -168,44 +172,46 @@ class CanMaster:
         while count < max_frames:
             remaining = deadline - self.clock()
             try:
-                msg = self.bus.recv(timeout=max(remaining, 0.0))
+                frame = self.port.recv(max(remaining, 0.0))
             except (can.CanError, OSError, ValueError) as exc:
                 self.bad_frames[type(exc).__name__] += 1
-                msg = None
-            if msg is None:
+                frame = None
+            if frame is None:
                 if remaining <= 0:
                     return count
                 continue
             count += 1
-            self.handle(msg, self.arrival_time(msg))
+            self._handle(frame.arbitration_id, frame.is_remote, frame.is_extended, frame.dlc, frame.data,
+                         self.arrival_time(frame.arrival))
             if stop_when is not None and stop_when():
                 return count
         return count
 
-    def arrival_time(self, msg) -> float:
-        """When the frame reached the socket, on `clock`: the interface's receive timestamp (wall clock,
-        kernel-stamped on udp_multicast and SocketCAN) moved onto `clock`; now if it is implausible."""
+    def arrival_time(self, stamp: float | None) -> float:
+        """When a frame reached the socket, on `clock`: the interface's receive timestamp `stamp` (wall
+        clock, kernel-stamped on udp_multicast and SocketCAN) moved onto `clock`; now if it is implausible."""
         now = self.clock()
-        lag = self.wall_clock() - (msg.timestamp or 0.0)
+        lag = self.wall_clock() - (stamp or 0.0)
         return now - lag if 0.0 <= lag < 1.0 else now
 
-    def handle(self, msg, now: float) -> None:
-        """One received python-can message: decode, ignore our own direction, update the axes."""
+    def handle(self, msg: can.Message, now: float) -> None:
+        """One received python-can message, arrived at `now` (clock time)."""
+        self._handle(msg.arbitration_id, msg.is_remote_frame, msg.is_extended_id, msg.dlc, bytes(msg.data), now)
+
+    def _handle(self, arbitration_id: int, remote: bool, extended: bool, dlc: int, data: bytes, now: float) -> None:
+        """One received frame: decode, ignore our own direction, update the axes."""
         self.rx_frames += 1
-        if self.fast_paths and msg.is_extended_id is False and msg.is_remote_frame is False:
-            kind = frame_layout.classify(msg.arbitration_id, msg.dlc, msg.data, self._node_ids)
+        if self.fast_paths and extended is False and remote is False:
+            kind = frame_layout.classify(arbitration_id, dlc, data, self._node_ids)
             if kind is frame_layout.ECHO:
                 self.echoes_ignored += 1
                 return
             if kind is frame_layout.ENCODER:
-                pos, vel = frame_layout.encoder_values(msg.data)
-                self._encoder(self.axes[msg.arbitration_id >> 5], pos, vel, now)
+                pos, vel = frame_layout.encoder_values(data)
+                self._encoder(self.axes[arbitration_id >> 5], pos, vel, now)
                 return
         try:
-            frame = cs.decode(
-                msg.arbitration_id, bytes(msg.data), msg.is_remote_frame, dlc=msg.dlc,
-                is_extended_id=msg.is_extended_id, nodes=self.nodes,
-            )
+            frame = cs.decode(arbitration_id, data, remote, dlc=dlc, is_extended_id=extended, nodes=self.nodes)
         except ProtocolError as exc:
             self.bad_frames[type(exc).__name__] += 1
             return

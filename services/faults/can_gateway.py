@@ -31,7 +31,7 @@ A frame's arrival time is the interface's kernel receive timestamp, so delays, w
 gateway got round to reading it; ``buffer_wait_ms`` (mean/max) is that reading lag.
 
 One thread: `select` on both buses' sockets, drain each ready bus in a batch (non-blocking
-reads until empty, at most BATCH frames; services/faults/can_ports.py), release what is due
+reads until empty, at most BATCH frames; services/can_ports.py), release what is due
 from a heap, babble when due.
 As `sharedctl fault-relay`, faults act from SIGUSR1 on (``--arm-on-signal``), counters go to
 ``--stats FILE`` at exit, including the gateway's CPU time and the frame rate it handled.
@@ -52,7 +52,7 @@ import can
 from ..can_bus import BusSpec, open_bus, resolve
 from ..controller.priority import make_loop_realtime
 from ..lifecycle import StopFlag
-from .can_ports import Frame, port_for
+from ..can_ports import Frame, port_for
 from .impairments import Pipeline
 from .spec import FaultPlan, FaultSpecError, parse, pipeline
 from .zenoh_relay import add_fault_arguments, write_stats

@@ -1,8 +1,9 @@
 """The robot process's I/O shell: CAN in/out, Zenoh ground truth and liveliness, the real-time loop.
 
 One thread. Every tick of the physics clock (1 kHz by default):
-  1. drain the CAN receive queue (non-blocking), decode each host → drive frame with the
-     CANSimple codec and hand it to the simulation; answer RTR polls at once;
+  1. drain the CAN receive queue (non-blocking, through services/can_ports.py), decode each
+     host → drive frame with the CANSimple codec and hand it to the simulation; answer RTR
+     polls at once;
   2. advance the simulation to now (watchdogs, RK4 steps) and send the cyclic frames due
      (Heartbeat 10 Hz, Get_Encoder_Estimates 500 Hz per axis);
   3. publish GroundTruth on Zenoh when due (100 Hz) and a Heartbeat message once a second.
@@ -26,6 +27,7 @@ from sharedctl.protocol.errors import ProtocolError
 from sharedctl.protocol.messages import GroundTruth, Heartbeat
 from sharedctl.protocol.msgpack_codec import encode_message
 
+from ..can_ports import Frame, port_for
 from ..lifecycle import RateClock, StopFlag
 from .simulation import RobotSimulation, is_own_direction
 
@@ -56,6 +58,7 @@ class RobotProcess:
     def __init__(self, sim: RobotSimulation, bus: can.BusABC, session, robot_id: str) -> None:
         self.sim = sim
         self.bus = bus
+        self.port = port_for(bus)        # frames without python-can's per-frame Message (services/can_ports.py)
         self.session = session
         self.robot_id = robot_id
         self.nodes = tuple(sim.by_node)
@@ -71,51 +74,49 @@ class RobotProcess:
     # ----- CAN -------------------------------------------------------------------
     def send(self, frame) -> None:
         f = cs.encode(frame)
-        msg = can.Message(arbitration_id=f.arbitration_id, data=f.data, is_remote_frame=f.is_remote,
-                          is_extended_id=False, dlc=f.dlc)
         try:
-            self.bus.send(msg)
+            self.port.send(f.arbitration_id, f.is_remote, f.dlc, f.data)
             self.counts["frames_out"] += 1
-        except can.CanError:
+        except (can.CanError, OSError):
             self.counts["send_errors"] += 1
 
     def receive_pending(self, now: float) -> None:
         for _ in range(MAX_FRAMES_PER_TICK):
             try:
-                msg = self.bus.recv(timeout=0)
-            except can.CanError:
+                frame = self.port.recv(0.0)
+            except (can.CanError, OSError, ValueError):
                 self.counts["bad_frames"] += 1
                 continue
-            if msg is None:
+            if frame is None:
                 return
-            self.handle_message(msg, now)
+            self.handle_message(frame, now)
 
-    def frame_time(self, msg: can.Message, now: float) -> float:
+    def frame_time(self, msg: Frame, now: float) -> float:
         """When the frame arrived (s, loop time), from its receive timestamp; `now` if that is implausible.
 
         A frame that waited in the socket while this process was not scheduled counts from its
         arrival, so a stall of the simulator itself never trips a drive's watchdog.
         """
-        stamp = msg.timestamp
+        stamp = msg.arrival
         if not stamp:
             return now
         at = stamp - self.wall_minus_monotonic - self.clock_start
         return at if now - 1.0 <= at <= now else now
 
-    def handle_message(self, msg: can.Message, now: float) -> None:
-        if msg.is_error_frame:
+    def handle_message(self, msg: Frame, now: float) -> None:
+        if msg.is_error:
             self.counts["error_frames"] += 1
             return
-        if not msg.is_extended_id:
-            if is_own_direction(msg.arbitration_id, msg.is_remote_frame):
+        if not msg.is_extended:
+            if is_own_direction(msg.arbitration_id, msg.is_remote):
                 self.counts["echoes"] += 1
                 return
             if (msg.arbitration_id >> 5) not in self.nodes:
                 self.counts["other_nodes"] += 1
                 return
         try:
-            frame = cs.decode(msg.arbitration_id, bytes(msg.data), msg.is_remote_frame, dlc=msg.dlc,
-                              is_extended_id=msg.is_extended_id, nodes=self.nodes)
+            frame = cs.decode(msg.arbitration_id, msg.data, msg.is_remote, dlc=msg.dlc,
+                              is_extended_id=msg.is_extended, nodes=self.nodes)
         except ProtocolError:
             self.counts["bad_frames"] += 1
             return

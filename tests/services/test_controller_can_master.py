@@ -124,14 +124,17 @@ def test_send_errors_are_counted_not_raised():
 
 
 def test_arrival_time_uses_the_interface_receive_timestamp():
-    master = CanMaster(MemoryBus(), clock=lambda: 50.0, wall_clock=lambda: 1000.0)
-    msg = message(cs.GetEncoderEstimates(0, 0.0, 0.0))
-    msg.timestamp = 999.996                       # stamped 4 ms before we read it
-    assert master.arrival_time(msg) == pytest.approx(49.996)
-    msg.timestamp = 0.0                           # no timestamp: the time it was read
-    assert master.arrival_time(msg) == 50.0
-    msg.timestamp = 1000.5                        # from the future (clock mismatch): the time it was read
-    assert master.arrival_time(msg) == 50.0
+    """A frame's arrival is the interface's receive stamp (wall clock) moved onto the master's clock."""
+    bus = MemoryBus()
+    master = CanMaster(bus, clock=lambda: 50.0, wall_clock=lambda: 1000.0)
+    for stamp, arrival in ((999.996, 49.996),     # stamped 4 ms before we read it
+                           (0.0, 50.0),           # no timestamp: the time it was read
+                           (1000.5, 50.0)):       # from the future (clock mismatch): the time it was read
+        msg = message(cs.GetEncoderEstimates(0, 0.0, 0.0))
+        msg.timestamp = stamp
+        bus.queue.append(msg)
+        assert master.receive_until(0.0) == 1
+        assert master.axes[0].estimate_frame_at == pytest.approx(arrival)
 
 
 def test_the_drives_encoder_period_is_the_median_interval_of_the_slowest_axis(master):

@@ -241,7 +241,7 @@ class TimedBus(MemoryBus):
 def running_with_drives_every(d, interval, periods=8):
     """Armed, with encoder frames `interval` apart so far (the drives' measured period)."""
     arm(d)
-    d.master.bus = TimedBus(d)
+    d.master.use_bus(TimedBus(d))
     for k in range(periods):
         feed(d, 10.0 - interval * (periods - k), heartbeat=False)
     d.last_tick_at = 10.0 - 0.5 * interval      # the previous tick saw the last set

@@ -392,13 +392,14 @@ class FakeBus:
     def __init__(self) -> None:
         self.sent: list[can.Message] = []
 
-    def send(self, msg: can.Message) -> None:
+    def send(self, msg: can.Message, timeout=None) -> None:
         self.sent.append(msg)
 
 
 def test_a_stall_of_the_simulator_does_not_trip_a_fed_watchdog():
     """Frames count from their receive timestamp, not from when the loop got round to them."""
     from sharedctl.models import OmniRobot
+    from sharedctl.services.can_ports import Frame
     from sharedctl.services.robot.plant import RobotSimConfig
     from sharedctl.services.robot.process import RobotProcess as Shell
     from sharedctl.services.robot.simulation import RobotSimulation
@@ -410,8 +411,8 @@ def test_a_stall_of_the_simulator_does_not_trip_a_fed_watchdog():
 
     def deliver(name, arrived, now, **signals):
         m = db.get_message_by_name(f"Axis0_{name}")
-        shell.handle_message(can.Message(arbitration_id=m.frame_id, data=m.encode(signals), is_extended_id=False,
-                                         timestamp=wall0 + arrived), now)
+        data = bytes(m.encode(signals))
+        shell.handle_message(Frame(m.frame_id, False, False, False, len(data), data, wall0 + arrived, None), now)
 
     deliver("Set_Controller_Mode", 0.0, 0.0, Control_Mode=TORQUE_CONTROL, Input_Mode=PASSTHROUGH)
     deliver("Set_Axis_State", 0.0, 0.0, Axis_Requested_State=CLOSED_LOOP_CONTROL)
