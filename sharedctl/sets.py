@@ -107,6 +107,28 @@ def _row_flags(x: float, x_dot: float, b0: float, b1: float, b2: float) -> tuple
     return hazardous, unsafe
 
 
+def classify_groups(feasible: FeasibleSet, q, v, bands: Bands, rows=None) -> tuple[SetClass, ...]:
+    """The class of every constraint group, in group order: classify_rows on group g's rows
+    x = K_g q + T_g, ẋ = K_g v, whether or not g's polytope contains q.
+
+    Row by row on Python floats (_row_flags, as in classify). `rows` may hold
+    `feasible.row_values(q, v)` already computed by the caller."""
+    b0, b1, b2 = bands.b0, bands.b1, bands.b2
+    rows = feasible.row_values(q, v) if rows is None else rows
+    classes = []
+    for g in range(len(feasible.groups)):
+        group_class = SetClass.SAFE
+        for xj, dj in zip(*feasible.group_rows(g, rows)):
+            hazardous, unsafe = _row_flags(xj, dj, b0, b1, b2)
+            if hazardous:
+                group_class = SetClass.HAZARD
+                break
+            if unsafe:
+                group_class = SetClass.HYSTERESIS
+        classes.append(group_class)
+    return tuple(classes)
+
+
 def classify(feasible: FeasibleSet, q: np.ndarray, v: np.ndarray, bands: Bands, rows=None) -> Situation:
     """Classify (q, v) against every polytope that contains q, then the union.
 

@@ -8,15 +8,16 @@ RobotState field mapping (see the daemon's docstring for where each value comes 
                   the observer's v̂ for output feedback)
   q_ref           StepOutput.q_r (the projected reference of the active group, or of the group
                   the machine would pick); q when the core has none (NaN)
-  group_classes   one class per constraint group, `sharedctl.sets.classify_rows` on that group's
-                  rows x = K_g q + T_g, ẋ = K_g q̇ (first 16 groups)
+  group_classes   one class per constraint group, `sharedctl.sets.classify_groups` (classify_rows
+                  on that group's rows x = K_g q + T_g, ẋ = K_g q̇; first 16 groups)
   active_group    StepOutput.group (None while the operator has authority)
   authority       core `Authority` → wire `Authority` by name; k_s = 1 if HUMAN else 0
   k_h, k_f        StepOutput.k_h, k_f
   u_h, u_f, u_s   StepOutput (u_s is what was applied: zeros while arming or in estop)
   wheel_torques   τ actually sent (after the torque-limit scaling)
   theta_hat       StepOutput.theta_estimate (the scenario's θ̂0 before the first step)
-  min_margin      FeasibleSet.margin(q); region_margins FeasibleSet.region_margins(q)
+  min_margin      FeasibleSet.margin(q), the largest of region_margins = FeasibleSet.region_margins(q)
+                  (both clipped to ±1e12)
   lease_holder    operator_id holding the authority lease (lease.py), None while it is free
   link            latency from send_time, loss from seq gaps, staleness, oldest wheel feedback age,
                   rejected_messages (every refused operator command and lease request)
@@ -32,24 +33,36 @@ from sharedctl.protocol.messages import Authority as WireAuthority
 from sharedctl.protocol.messages import Event, EventKind, LinkHealth, RobotState, Severity
 from sharedctl.protocol.messages import SetClass as WireSetClass
 from sharedctl.protocol.wire_types import MAX_GROUPS, MAX_REGIONS, MAX_TEXT_LEN
-from sharedctl.sets import classify_rows
+from sharedctl.sets import SetClass, classify_groups
+from sharedctl.short_vectors import all_finite
 from sharedctl.sharing import Authority
 
 MAX_MS = 1.0e9   # a bound for "never" in the millisecond link fields (the wire needs finite values)
+MAX_MARGIN = 1.0e12     # the bound of the margin fields
+WIRE_CLASS = {c: WireSetClass[c.name] for c in SetClass}
 
 
-def group_classes(feasible, bands, q: np.ndarray, v: np.ndarray) -> tuple[WireSetClass, ...]:
-    """Per-group class: `classify_rows` on each group's rows (x = K q + T, ẋ = K v)."""
-    return tuple(
-        WireSetClass[classify_rows(g.values(q), g.K @ v, bands).name] for g in feasible.groups[:MAX_GROUPS]
-    )
+def group_classes(feasible, bands, q, v, rows=None) -> tuple[WireSetClass, ...]:
+    """Per-group class of the first MAX_GROUPS groups: `classify_groups` (classify_rows on each
+    group's rows x = K q + T, ẋ = K v). `rows`: feasible.row_values(q, v), if known."""
+    return tuple(WIRE_CLASS[c] for c in classify_groups(feasible, q, v, bands, rows)[:MAX_GROUPS])
 
 
 def _finite(values, fallback) -> tuple[float, ...]:
+    """`values` as floats if it has the shape of `fallback` and is finite, else `fallback` as floats."""
     arr = np.asarray(values, dtype=float)
+    if arr.ndim == 1 and arr.shape == np.shape(fallback):
+        items = arr.tolist()
+        if all_finite(items):
+            return tuple(items)
     if arr.shape != np.shape(fallback) or not np.all(np.isfinite(arr)):
         arr = np.asarray(fallback, dtype=float)
     return tuple(float(x) for x in arr)
+
+
+def _clip_margin(margin: float) -> float:
+    """`margin` within ±MAX_MARGIN (NaN stays NaN, as with np.clip)."""
+    return -MAX_MARGIN if margin < -MAX_MARGIN else MAX_MARGIN if margin > MAX_MARGIN else margin
 
 
 def _ms(seconds: float) -> float:
@@ -72,12 +85,17 @@ def robot_state(
     """A `RobotState` from the last `StepOutput` (`out`) and what the daemon measured."""
     n = len(q)
     zeros = np.zeros(n)
+    q_array, v_array = np.asarray(q, dtype=float), np.asarray(v, dtype=float)
+    if q_array.shape != (feasible.n,) or v_array.shape != (feasible.n,):
+        raise ValueError(f"q and v need {feasible.n} entries each, got shapes {q_array.shape} and {v_array.shape}")
+    rows = feasible.row_values(q_array.tolist(), v_array.tolist())
+    margins = feasible.region_margins(q_array).tolist()     # numpy's K q + T: `rows` may differ in a zero's sign
     authority = out.authority if out is not None else Authority.HUMAN
     group = out.group if out is not None and out.group is not None and out.group < MAX_GROUPS else None
     return RobotState(
         seq=seq, time=max(time, 0.0), q=_finite(q, zeros), qd_hat=_finite(v, zeros),
         q_ref=_finite(out.q_r if out is not None else q, q),
-        group_classes=group_classes(feasible, bands, np.asarray(q, float), np.asarray(v, float)),
+        group_classes=group_classes(feasible, bands, q_array, v_array, rows),
         active_group=group, authority=WireAuthority[authority.name],
         k_s=1.0 if authority is Authority.HUMAN else 0.0,
         k_h=float(min(max(out.k_h, 0.0), 1.0)) if out is not None else 1.0,
@@ -87,8 +105,8 @@ def robot_state(
         u_s=_finite(u_s, zeros),
         wheel_torques=_finite(wheel_torques, np.zeros(len(wheel_torques))),
         theta_hat=_finite(theta_hat, np.zeros(len(theta_hat))),
-        min_margin=float(np.clip(feasible.margin(np.asarray(q, float)), -1e12, 1e12)),
-        region_margins=tuple(float(np.clip(m, -1e12, 1e12)) for m in feasible.region_margins(np.asarray(q, float))[:MAX_REGIONS]),
+        min_margin=_clip_margin(max(margins)),
+        region_margins=tuple(_clip_margin(m) for m in margins[:MAX_REGIONS]),
         estop_active=estop_active, lease_holder=lease_holder,
         link=LinkHealth(
             operator_latency_ms=_ms(link.latency), loss_fraction=float(min(max(link.loss_fraction, 0.0), 1.0)),
