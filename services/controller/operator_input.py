@@ -79,6 +79,8 @@ class OperatorInputPolicy:
     lease: OperatorLease = field(default_factory=OperatorLease)   # who may command (lease.py)
     guard: ReplayGuard = field(default_factory=ReplayGuard)       # order and age (replay_guard.py)
     _recent: deque = field(default_factory=deque)        # seqs of the current session
+    _input_of: tuple | None = None                        # (command, hands_off) that `_input` was built from
+    _input: OperatorInput | None = None
 
     def __post_init__(self) -> None:
         self.kp = np.asarray(self.kp, dtype=float)
@@ -157,19 +159,27 @@ class OperatorInputPolicy:
     def operator_input(self, now: float, pose: np.ndarray) -> tuple[OperatorInput, OperatorStatus]:
         """The `OperatorInput` for the control period starting at `now`, robot at `pose`."""
         status = self.status(now)
+        cmd = self.current
+        if cmd is not None and self._input_of is not None and self._input_of[0] is cmd \
+                and self._input_of[1] == status.hands_off:
+            return self._input, status          # the same command, judged the same: the same input
         n = len(self.kp)
         zero = np.zeros(n)
-        if self.current is None:
+        if cmd is None:
             return OperatorInput(Desired(np.asarray(pose, float).copy(), zero, zero.copy()), zero.copy(), 0.0), status
-        cmd = self.current
         q_d = np.asarray(cmd.q_d, dtype=float)
         if status.hands_off:
-            return OperatorInput(Desired(q_d, zero, zero.copy()), zero.copy(), 0.0), status
-        deflection = np.asarray(cmd.joystick, dtype=float)
-        force = self.kp * deflection                                   # (44)
-        intent = 0.5 * float(np.sum(self.kp * deflection * deflection))  # (45)
-        desired = Desired(q_d, np.asarray(cmd.qd_d, dtype=float), np.asarray(cmd.qdd_d, dtype=float))
-        return OperatorInput(desired, force, intent), status
+            built = OperatorInput(Desired(q_d, zero, zero.copy()), zero.copy(), 0.0)
+        else:
+            deflection = np.asarray(cmd.joystick, dtype=float)
+            force = self.kp * deflection                                   # (44)
+            intent = 0.5 * float(np.sum(self.kp * deflection * deflection))  # (45)
+            built = OperatorInput(Desired(q_d, np.asarray(cmd.qd_d, dtype=float), np.asarray(cmd.qdd_d, dtype=float)),
+                                  force, intent)
+        for array in (built.desired.q, built.desired.q_dot, built.desired.q_ddot, built.force):
+            array.flags.writeable = False       # handed out again every period until the next command
+        self._input_of, self._input = (cmd, status.hands_off), built
+        return built, status
 
     def loss_fraction(self) -> float:
         """1 − received / span of seqs over the recent window of the current session."""

@@ -129,3 +129,21 @@ def test_latency_is_unknown_when_clocks_disagree():
     policy.offer(encode_message(command(1, send_time=5000.0)), 10.0, wall_now=10.0)
     assert policy.operator_input(10.0, POSE)[1].latency == 0.0
     assert math.isfinite(policy.operator_input(10.0, POSE)[1].staleness)
+
+
+def test_the_input_follows_every_new_command_and_every_change_of_hands_off():
+    """The input is built once per (command, hands-off) and handed out again, read-only, until either changes."""
+    policy = OperatorInputPolicy(KP)
+    now = 10.0
+    for seq, joystick in enumerate([(0.5, -0.25, 0.1), (0.5, -0.25, 0.1), (-1.0, 0.0, 0.3), (0.0, 0.0, 0.0)], start=1):
+        assert offer(policy, command(seq, joystick=joystick, q_d=(seq, 2.0, 0.0)), now)
+        first, _ = policy.operator_input(now + 0.01, POSE)
+        again, status = policy.operator_input(now + 0.02, POSE)
+        assert again is first and not status.hands_off
+        np.testing.assert_allclose(first.force, KP * np.array(joystick))
+        np.testing.assert_allclose(first.desired.q, [seq, 2.0, 0.0])
+        with pytest.raises(ValueError):
+            first.force[0] = 1.0
+        stale, status = policy.operator_input(now + 0.31, POSE)
+        assert status.hands_off and stale.intent == 0.0 and not np.any(stale.force)
+        now += 0.5
