@@ -28,6 +28,16 @@ class StopFlag:
         return self._event.wait(seconds)
 
 
+def hold_until(t: float, spin: float) -> None:
+    """Return at monotonic time `t` (at once if it has passed): sleep until `spin` before it, then
+    poll the clock (a sleeping thread wakes tens of microseconds late; see RateClock)."""
+    delay = t - time.monotonic() - spin
+    if delay > 0:
+        time.sleep(delay)
+    while time.monotonic() < t:
+        pass
+
+
 class RateClock:
     """Absolute-deadline periodic clock (no drift): `wait()` sleeps until the next tick.
 

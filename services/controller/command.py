@@ -6,7 +6,7 @@
                          [--rate 500] [--telemetry-rate 50] [--torque-limit 60] [--duration S]
                          [--feedback-timeout-ms 50] [--priority realtime|high|normal] [--quiet]
                          [--[no-]sensor-sync] [--sensor-lead-us 250] [--sensor-wait-us T/4] [--spin-us 100]
-                         [--cpu N]
+                         [--torque-at-us 0] [--cpu N]
                          [--lease implicit|explicit] [--lease-expiry-ms 1000] [--max-command-age-ms 500]
                          [--max-clock-skew-ms MS]
 """
@@ -64,6 +64,9 @@ def add_parser(subparsers) -> None:
     p.add_argument("--spin-us", type=float, default=100.0,
                    help="poll the clock for this long before each deadline instead of sleeping (default 100; "
                         "0: plain sleep; costs at most this much CPU per tick)")
+    p.add_argument("--torque-at-us", type=float, default=0.0,
+                   help="send each tick's torque frames this long after its deadline, not as soon as they are "
+                        "computed (time-triggered output: a constant actuation delay; 0, the default: at once)")
     p.add_argument("--cpu", type=int, metavar="N",
                    help="run the loop thread on CPU N alone and keep the process's other threads (Zenoh, CAN) off it "
                         "(default: no pinning; docs/performance.md)")
@@ -90,8 +93,9 @@ def run(args) -> int:
         robot_id = check_robot_id(args.robot_id)
         if not (args.rate > 0 and args.telemetry_rate > 0 and args.torque_limit > 0 and args.feedback_timeout_ms > 0):
             raise ValueError("--rate, --telemetry-rate, --torque-limit and --feedback-timeout-ms must be positive")
-        if not 0.0 <= args.spin_us < 1e6 / args.rate or not 0.0 <= args.sensor_lead_us < 1e6 / args.rate:
-            raise ValueError("--spin-us and --sensor-lead-us must be ≥ 0 and shorter than the control period")
+        if not all(0.0 <= value < 1e6 / args.rate for value in (args.spin_us, args.sensor_lead_us, args.torque_at_us)):
+            raise ValueError("--spin-us, --sensor-lead-us and --torque-at-us must be ≥ 0 and shorter than the "
+                             "control period")
         if args.sensor_wait_us is None:
             args.sensor_wait_us = 0.25e6 / args.rate
         if not 0.0 <= args.sensor_wait_us < 0.5e6 / args.rate:
@@ -115,7 +119,8 @@ def run(args) -> int:
         feedback_timeout=args.feedback_timeout_ms / 1e3, duration=args.duration, verbose=not args.quiet,
         realtime=args.priority == "realtime", sensor_sync=args.sensor_sync, sensor_lead=args.sensor_lead_us / 1e6,
         sensor_wait=args.sensor_wait_us / 1e6,
-        spin=args.spin_us / 1e6, lease_mode=args.lease, lease_expiry=args.lease_expiry_ms / 1e3,
+        spin=args.spin_us / 1e6, torque_at=args.torque_at_us / 1e6,
+        lease_mode=args.lease, lease_expiry=args.lease_expiry_ms / 1e3,
         max_command_age=args.max_command_age_ms / 1e3,
         max_clock_skew=None if args.max_clock_skew_ms is None else args.max_clock_skew_ms / 1e3,
     )

@@ -14,7 +14,8 @@ the reading past it). Timing (docs/performance.md): the next deadline is locked 
 wheel estimates arrive (phase.py, on by default); the last `spin` before it is polled rather than
 slept (`RateClock`); a tick whose estimates are late waits for them, briefly (`sensor_wait`);
 operator commands wait in a Zenoh channel that the loop polls (command_intake.py: no Python
-callback thread, so none can hold the GIL when the loop wakes); a warm-up step runs and
+callback thread, so none can hold the GIL when the loop wakes); with `torque_at` a tick's torque
+frames are held until that long after its deadline (time-triggered output); a warm-up step runs and
 `gc.freeze()` is called before the clock starts. RobotState goes out at the telemetry
 rate, events when something changes (rate-limited), a Heartbeat message at 1 Hz and a
 liveliness token for as long as the daemon runs.
@@ -49,7 +50,7 @@ from sharedctl.protocol.msgpack_codec import encode_message
 from sharedctl.protocol.wire_types import Dims
 from sharedctl.shared_controller import NonFiniteCommand, SharedController
 
-from ..lifecycle import RateClock
+from ..lifecycle import RateClock, hold_until
 from . import command_intake, lease_queries
 from .can_master import CanMaster
 from .command_intake import CommandIntake
@@ -90,6 +91,7 @@ class DaemonConfig:
     sensor_lead: float = 2.5e-4         # s after the estimates' arrival at which a synchronised tick starts
     sensor_wait: float = 5e-4           # s a synchronised tick waits, at most, for its period's estimates (0: never)
     spin: float = 1e-4                  # s before each deadline polled instead of slept (lifecycle.RateClock)
+    torque_at: float = 0.0              # s after its deadline at which a tick sends its torques (0: once computed)
     lease_mode: str = LeaseMode.IMPLICIT  # implicit: a command takes a free lease; explicit: only a take (lease.py)
     lease_expiry: float = DEFAULT_EXPIRY  # s without commands/takes from the holder → lease free
     max_command_age: float = DEFAULT_MAX_AGE  # s later than the session's best delivery → stale (replay_guard.py)
@@ -147,6 +149,7 @@ class ControllerDaemon:
         self.sensor_waits = 0                    # ticks that waited for their period's wheel estimates
         self.sensor_wait_timeouts = 0            # … and started without them, after `sensor_wait`
         self.last_tick_at: float | None = None
+        self.deadline: float | None = None       # the clock's deadline of the tick under way (None outside run)
         self.realtime = False
         self.phase_lock = SensorPhaseLock(self.period, lead=config.sensor_lead) if config.sensor_sync else None
         self._declare(session)
@@ -217,6 +220,7 @@ class ControllerDaemon:
         try:
             while not stop.stopped:
                 lateness = clock.wait()
+                self.deadline = clock.next - self.period
                 cpu_at_tick = time.thread_time()
                 self.histogram.add(lateness)
                 if lateness > 0.5 * self.period:
@@ -387,6 +391,8 @@ class ControllerDaemon:
             tau = tuple(t * scale for t in tau)
             self.saturated += 1
         self.out, self.u_s, self.tau = out, out.u_s, np.array(tau)
+        if self.config.torque_at > 0.0:
+            hold_until((now if self.deadline is None else self.deadline) + self.config.torque_at, self.config.spin)
         self.master.send_torques(tau)
         sent = time.monotonic()
         self.torque_out.add(sent - now)

@@ -1,6 +1,7 @@
 """The daemon's per-period logic (services/controller/daemon.py), stepped by hand with an in-memory
 bus and an in-memory Zenoh session: arming, control, estops, re-arm, NonFiniteCommand."""
 import math
+import time
 
 import can
 import numpy as np
@@ -297,3 +298,17 @@ def test_sensor_to_torque_runs_from_the_oldest_estimate_used_to_the_torque_frame
     assert daemon.sensor_to_torque.n == 1 and daemon.torque_out.n == 1
     age = daemon.sensor_to_torque.quantile(0.5)
     assert 0.0008 <= age <= 0.0008 + daemon.torque_out.quantile(0.5) + 1e-5
+
+
+def test_with_torque_at_the_torque_frames_leave_that_long_after_the_ticks_deadline(daemon):
+    """Time-triggered output (--torque-at-us): computed at once, sent at deadline + torque_at, never before."""
+    arm(daemon)
+    daemon.master.bus.take()
+    sent_at = []
+    send = daemon.master.bus.send
+    daemon.master.bus.send = lambda msg, timeout=None: (sent_at.append(time.monotonic()), send(msg, timeout))
+    daemon.config.torque_at = 0.02
+    daemon.deadline = time.monotonic()
+    feed(daemon, 10.004, heartbeat=False)
+    daemon.tick(10.004)
+    assert len(sent_at) == 3 and min(sent_at) >= daemon.deadline + 0.02

@@ -57,3 +57,14 @@ def test_ticks_overrun_by_more_than_a_period_are_counted_as_missed(fake):
 def test_a_negative_spin_is_refused():
     with pytest.raises(ValueError):
         RateClock(0.002, spin=-1e-4)
+
+
+def test_hold_until_sleeps_to_spin_before_the_instant_then_polls_to_it(fake):
+    lifecycle.hold_until(100.010, spin=1e-4)
+    assert fake.slept == [pytest.approx(0.0099, abs=2e-6)]
+    assert 100.010 <= fake.now < 100.010 + 2e-6
+
+
+def test_hold_until_an_instant_that_has_passed_returns_at_once(fake):
+    lifecycle.hold_until(99.0, spin=1e-4)
+    assert fake.slept == [] and fake.polls == 2
