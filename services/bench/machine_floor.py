@@ -53,10 +53,12 @@ def _calibrate(work_us: float) -> int:
     return iterations
 
 
-def _steal_jiffies() -> int | None:
+def steal_seconds() -> float | None:
+    """The guest's steal time so far (s; /proc/stat): time its vCPUs were ready but the hypervisor ran
+    something else. None where the kernel does not report it."""
     try:
         with open("/proc/stat") as f:
-            return int(f.readline().split()[8])
+            return int(f.readline().split()[8]) / os.sysconf("SC_CLK_TCK")
     except (OSError, IndexError, ValueError):
         return None
 
@@ -72,7 +74,7 @@ def _loop(rate_hz: float, seconds: float, work_us: float, spin: float, pre_send_
     ticks = int(seconds * rate_hz)
     lateness, wall, cpu_ns = np.empty(ticks), np.empty(ticks), np.empty(ticks)
     sent, pre_wall = np.empty(ticks), np.empty(ticks)
-    steal0 = _steal_jiffies()
+    steal0 = steal_seconds()
     clock = RateClock(period, spin=spin)
     late = 0
     for k in range(ticks):
@@ -85,7 +87,7 @@ def _loop(rate_hz: float, seconds: float, work_us: float, spin: float, pre_send_
             _work(post)
         wall[k], cpu_ns[k] = time.perf_counter_ns() - w0, time.thread_time_ns() - c0
         pre_wall[k] = sent[k] - w0
-    steal1 = _steal_jiffies()
+    steal1 = steal_seconds()
     us = lambda a: {k: v / 1e3 for k, v in percentiles(a).items() if k != "n"}   # noqa: E731
     return {
         "rate_hz": rate_hz, "seconds": seconds, "work_us": work_us, "pre_send_us": pre_us, "realtime": realtime,
@@ -95,7 +97,7 @@ def _loop(rate_hz: float, seconds: float, work_us: float, spin: float, pre_send_
         "pre_send_wall_us": us(pre_wall), "send_jitter_us": us(np.abs(np.diff(sent) - period * 1e9)),
         "deadline_to_send_us": us(lateness * 1e9 + pre_wall),
         "ticks_over_half_period": int((wall > period * 0.5e9).sum()),
-        "steal_s": None if steal0 is None or steal1 is None else (steal1 - steal0) / os.sysconf("SC_CLK_TCK"),
+        "steal_s": None if steal0 is None or steal1 is None else steal1 - steal0,
     }
 
 

@@ -129,7 +129,9 @@ def _floor_section(report: dict, floor: dict) -> list[str]:
         ("period jitter p50 / p99 µs (the daemon: torque bursts on the bus; the floor: its send instants)",
          f"{_fmt(lookup(report, 'loop.jitter_p50_us'))} / {_fmt(lookup(report, 'loop.jitter_p99_us'))}",
          f"{_fmt(floor['send_jitter_us']['p50'])} / {_fmt(floor['send_jitter_us']['p99'])}"),
-        ("wake-up lateness p99 µs", _fmt(lookup(report, "loop.daemon.lateness_p99_us")), _fmt(floor["lateness_us"]["p99"])),
+        ("wake-up lateness p99 / max µs",
+         f"{_fmt(lookup(report, 'loop.daemon.lateness_p99_us'))} / {_fmt(lookup(report, 'loop.daemon.lateness_max_us'))}",
+         f"{_fmt(floor['lateness_us']['p99'])} / {_fmt(floor['lateness_us']['max'])}"),
         ("tick start → send p50 / p99 µs",
          f"{_fmt(lookup(report, 'loop.daemon.torque_out_p50_us'))} / {_fmt(lookup(report, 'loop.daemon.torque_out_p99_us'))}",
          f"{_fmt(floor['pre_send_wall_us']['p50'])} / {_fmt(floor['pre_send_wall_us']['p99'])}"),
@@ -139,6 +141,7 @@ def _floor_section(report: dict, floor: dict) -> list[str]:
         (f"sensor → torque p99 µs (the floor: the sensor lead, {SENSOR_LEAD_US:g} µs, + deadline → send p99)",
          _fmt(lookup(report, "latency.sensor_to_torque_us.p99")),
          _fmt(floor["deadline_to_send_us"]["p99"] + SENSOR_LEAD_US)),
+        ("the guest's steal time over the run, s", _fmt(lookup(report, "cpu.steal_s")), _fmt(floor.get("steal_s"))),
     ]
     out += ["The 500 Hz loop beside its floor (the floor ran right after it, with its amounts of work):", "",
             "| figure | the daemon's loop | the bare loop |", "|---|---:|---:|"]

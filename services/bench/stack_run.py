@@ -24,7 +24,8 @@ timestamps over Zenoh and over a second udp_multicast port: the transport floors
 * the drives' send jitter: |Δt − T| between the simulated drives' bursts of encoder estimates (500 Hz),
   the other side of sensor → torque.
 * bus load: every frame seen on the bus in the window, worst-case stuffed (bus_load.py).
-* CPU: utime + stime of both processes from /proc/<pid>/stat over the window.
+* CPU: utime + stime of both processes from /proc/<pid>/stat over the window; beside it the guest's
+  steal time over the window (/proc/stat), as the machine floor reports its own.
 """
 from __future__ import annotations
 
@@ -48,6 +49,7 @@ from sharedctl.protocol.odrive_enums import CommandId
 from .. import can_bus, children, zenoh_session
 from .bus_load import bus_load
 from .hop_probe import PROBE_CAN_ID, PROBE_KEY, unpack_time
+from .machine_floor import steal_seconds
 from .statistics import group_bursts, missed_periods, percentiles, period_jitter
 
 ROBOT_ID = "robot1"
@@ -184,7 +186,8 @@ def run(rate_hz: float, seconds: float, log_dir: Path | None = None, probes: boo
         next_cmd = time.monotonic()
         while time.monotonic() - t0 < SETTLE + seconds:
             if cpu_start is None and time.time() >= window[0]:
-                cpu_start = (time.monotonic(), {c.name: _cpu_seconds(c.popen.pid) for c in (robot, controller)})
+                cpu_start = (time.monotonic(), {c.name: _cpu_seconds(c.popen.pid) for c in (robot, controller)},
+                             steal_seconds())
             seq += 1
             sign = -sign
             cmd = _command(seq, session_id, sign)
@@ -192,7 +195,7 @@ def run(rate_hz: float, seconds: float, log_dir: Path | None = None, probes: boo
             operator_log.append((cmd.send_time, sign))
             next_cmd += 1.0 / OPERATOR_RATE
             time.sleep(max(next_cmd - time.monotonic(), 0.0))
-        cpu_end = (time.monotonic(), {c.name: _cpu_seconds(c.popen.pid) for c in (robot, controller)})
+        cpu_end = (time.monotonic(), {c.name: _cpu_seconds(c.popen.pid) for c in (robot, controller)}, steal_seconds())
         for child in started:
             try:
                 child.popen.wait(timeout=5.0)
@@ -279,7 +282,9 @@ def _cpu(start, end) -> dict:
     wall = end[0] - start[0]
     per = {name: (end[1][name] - start[1][name]) / wall
            for name in end[1] if end[1][name] is not None and start[1].get(name) is not None}
-    return {"fraction_of_one_core": sum(per.values()) if per else None, "per_process": per, "window_s": wall}
+    steal = None if start[2] is None or end[2] is None else end[2] - start[2]
+    return {"fraction_of_one_core": sum(per.values()) if per else None, "per_process": per, "window_s": wall,
+            "steal_s": steal}
 
 
 def analyse(frames: list[Frame], operator_log, window, rate_hz: float, summary: dict) -> dict:
