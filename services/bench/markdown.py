@@ -69,7 +69,8 @@ def render(report: dict) -> str:
         out.append(f"| loop {key} | " + " | ".join(_fmt(lookup(report, f"{r}.{key}")) for r in runs) + " |")
     for key in ("missed", "late", "estops", "lateness_p99_us", "compute_p50_us", "compute_p99_us",
                 "torque_out_p50_us", "torque_out_p99_us", "sensor_to_torque_p50_us", "sensor_to_torque_p99_us",
-                "loop_cpu_p50_us", "loop_cpu_p99_us", "sensor_waits", "sensor_waits_in_vain"):
+                "loop_cpu_p50_us", "loop_cpu_p99_us", "sensor_waits", "sensor_waits_in_vain", "misses_woke_late",
+                "misses_not_run", "misses_working", "misses_working_cpu_p50_us"):
         out.append(f"| daemon {key} | " + " | ".join(_fmt(lookup(report, f"{r}.daemon.{key}")) for r in runs) + " |")
     out.append("| the drives' send jitter p50 / p99 µs | " + " | ".join(
         f"{_fmt(lookup(report, f'{r}.drives_send_jitter_us.p50'))} / {_fmt(lookup(report, f'{r}.drives_send_jitter_us.p99'))}"

@@ -268,7 +268,16 @@ def _daemon_summary(controller: children.Child) -> dict:
             "loop_cpu_p50_us": float(g["l50"]) * 1e3 if g["l50"] else None,
             "loop_cpu_p99_us": float(g["l99"]) * 1e3 if g["l99"] else None,
             "sensor_waits": _int_after(r"waited for their wheel estimates (\d+)", tail),
-            "sensor_waits_in_vain": _int_after(r"waited for their wheel estimates \d+ \((\d+) in vain\)", tail)}
+            "sensor_waits_in_vain": _int_after(r"waited for their wheel estimates \d+ \((\d+) in vain\)", tail),
+            "misses_woke_late": _int_after(r"by cause: (\d+) woke late", tail),
+            "misses_not_run": _int_after(r"(\d+) overran while not running", tail),
+            "misses_working": _int_after(r"(\d+) overran while working", tail),
+            "misses_working_cpu_p50_us": _ms_after_as_us(r"overran while working \(thread CPU p50 ([\d.]+) ms\)", tail)}
+
+
+def _ms_after_as_us(pattern: str, text: str) -> float | None:
+    match = re.search(pattern, text)
+    return float(match.group(1)) * 1e3 if match else None
 
 
 def _int_after(pattern: str, text: str) -> int | None:

@@ -55,7 +55,7 @@ from . import command_intake, lease_queries
 from .can_master import CanMaster
 from .command_intake import CommandIntake
 from .lease import DEFAULT_EXPIRY, LeaseMode, OperatorLease
-from .loop_summary import LatenessHistogram, Summary
+from .loop_summary import LatenessHistogram, MissCauses, Summary
 from .odometry import WheelOdometry, oldest_feedback_age
 from .phase import SensorPhaseLock, estimates_arrival
 from .operator_input import OperatorInputPolicy
@@ -146,6 +146,7 @@ class ControllerDaemon:
         self.sensor_to_torque = LatenessHistogram()   # arrival of the oldest estimate a tick used → its torque frames sent
         self.loop_cpu = LatenessHistogram()      # the loop thread's CPU time per period, outside the clock's wait
         self.late = 0
+        self.miss_causes = MissCauses()
         self.sensor_waits = 0                    # ticks that waited for their period's wheel estimates
         self.sensor_wait_timeouts = 0            # … and started without them, after `sensor_wait`
         self.last_tick_at: float | None = None
@@ -217,14 +218,19 @@ class ControllerDaemon:
         cpu0, t0 = time.process_time(), time.monotonic()
         self.master.request_arming()
         ticks = 0
+        period_cpu = 0.0
         try:
             while not stop.stopped:
+                reached, due, missed_before = time.monotonic(), clock.next, clock.missed
                 lateness = clock.wait()
                 self.deadline = clock.next - self.period
                 cpu_at_tick = time.thread_time()
                 self.histogram.add(lateness)
-                if lateness > 0.5 * self.period:
-                    self.late += 1
+                late = lateness > 0.5 * self.period
+                self.late += late
+                if ticks:
+                    self.miss_causes.note(clock.missed - missed_before + late, reached <= due, period_cpu,
+                                          self.loop_cpu.quantile(0.5))
                 self.master.receive_until(0.0)    # what arrived during the margin and the spin (or a stall)
                 self.await_estimates()
                 now = time.monotonic()
@@ -241,7 +247,8 @@ class ControllerDaemon:
                 if self.phase_lock is not None and (arrival := estimates_arrival(self.master.estimates())) is not None:
                     clock.next += self.phase_lock.correction(clock.next, arrival)
                 self.receive_until(clock.next - config.spin - RECEIVE_MARGIN)
-                self.loop_cpu.add(time.thread_time() - cpu_at_tick)
+                period_cpu = time.thread_time() - cpu_at_tick
+                self.loop_cpu.add(period_cpu)
         finally:
             self.shutdown()
         elapsed = time.monotonic() - t0
@@ -257,6 +264,8 @@ class ControllerDaemon:
             sensor_to_torque_p50_ms=self.sensor_to_torque.quantile(0.5) * 1e3,
             sensor_to_torque_p99_ms=self.sensor_to_torque.quantile(0.99) * 1e3,
             sensor_waits=self.sensor_waits, sensor_wait_timeouts=self.sensor_wait_timeouts,
+            misses_woke_late=self.miss_causes.woke_late, misses_not_run=self.miss_causes.not_run,
+            misses_working=self.miss_causes.working, working_cpu_p50_ms=self.miss_causes.working_cpu_p50() * 1e3,
             frames_rx=self.master.rx_frames,
             frames_tx=self.master.tx_frames, bad_frames=self.master.bad_frame_count,
             implausible_estimates=sum(self.master.implausible_estimates.values()),

@@ -63,6 +63,10 @@ class Summary:
     mode: str = ""
     sensor_waits: int = 0
     sensor_wait_timeouts: int = 0
+    misses_woke_late: int = 0          # missed/late deadlines by cause (MissCauses)
+    misses_not_run: int = 0
+    misses_working: int = 0
+    working_cpu_p50_ms: float = 0.0    # the loop thread's CPU in the periods that overran while working
 
     def line(self) -> str:
         rej = sum(self.rejections.values())
@@ -79,5 +83,44 @@ class Summary:
             f"{self.implausible_estimates}; operator commands "
             f"{self.commands_accepted} accepted, {rej} rejected{f' ({detail})' if detail else ''}; "
             f"estops {self.estops}, torque-limited ticks {self.saturated}; ticks that waited for their wheel "
-            f"estimates {self.sensor_waits} ({self.sensor_wait_timeouts} in vain)"
+            f"estimates {self.sensor_waits} ({self.sensor_wait_timeouts} in vain); missed and late deadlines by "
+            f"cause: {self.misses_woke_late} woke late, {self.misses_not_run} overran while not running, "
+            f"{self.misses_working} overran while working (thread CPU p50 {self.working_cpu_p50_ms:.3f} ms)"
         )
+
+
+@dataclass
+class MissCauses:
+    """Why the loop missed deadlines, from its own clock and CPU time (no extra load).
+
+    For each tick whose deadline was missed or met more than half a period late, the period
+    before it is one of:
+      * woke late: the loop was waiting in time (it reached the clock before the deadline) and
+        the thread came back half a period or more after it: it was not run while asleep or
+        polling — on its own real-time CPU, the machine's doing (hypervisor, kernel);
+      * overran while not running: its period's work ended after the deadline, yet used no more
+        than `WORKING` × the median thread CPU per period: the thread was not run for much of it;
+      * overran while working: the work ended after the deadline and used more than that CPU —
+        the loop's own cost, or the vCPU running slower (the CPU figures say which).
+    Counted in the unit of `missed + late`."""
+
+    WORKING = 2.0
+
+    woke_late: int = 0
+    not_run: int = 0
+    working: int = 0
+    working_cpu: list = field(default_factory=list)   # s of thread CPU of each period that overran while working
+
+    def note(self, count: int, reached_clock_in_time: bool, period_cpu: float, median_cpu: float) -> None:
+        if count <= 0:
+            return
+        if reached_clock_in_time:
+            self.woke_late += count
+        elif period_cpu > self.WORKING * median_cpu:
+            self.working += count
+            self.working_cpu.append(period_cpu)
+        else:
+            self.not_run += count
+
+    def working_cpu_p50(self) -> float:
+        return float(np.median(self.working_cpu)) if self.working_cpu else 0.0

@@ -125,3 +125,20 @@ def test_estimates_that_arrived_after_the_tick_started_are_not_counted_as_used()
     compute_only = analyse(frames, [], (0.0, 0.4), 500.0, {"compute_p50_us": 500.0, "missed": 0, "late": 0})
     assert with_out["latency"]["sensor_to_torque_us"]["p50"] == pytest.approx(300.0, abs=1e-3)
     assert compute_only["latency"]["sensor_to_torque_us"]["p50"] == pytest.approx(2300.0, abs=1e-3)
+
+
+def test_the_causes_of_missed_deadlines_are_read_from_the_summary_line():
+    from sharedctl.services.bench.stack_run import _daemon_summary
+    from sharedctl.services.controller.loop_summary import Summary
+
+    line = Summary(ticks=9000, elapsed=18.0, rate=500.0, missed=3, late=4, misses_woke_late=2, misses_not_run=4,
+                   misses_working=1, working_cpu_p50_ms=2.25).line()
+
+    class Child:
+        def tail(self, lines):
+            return "other output\n" + line + "\n"
+
+    got = _daemon_summary(Child())
+    assert (got["missed"], got["late"], got["misses_woke_late"], got["misses_not_run"], got["misses_working"]) == (
+        3, 4, 2, 4, 1)
+    assert got["misses_working_cpu_p50_us"] == 2250.0

@@ -312,3 +312,42 @@ def test_with_torque_at_the_torque_frames_leave_that_long_after_the_ticks_deadli
     feed(daemon, 10.004, heartbeat=False)
     daemon.tick(10.004)
     assert len(sent_at) == 3 and min(sent_at) >= daemon.deadline + 0.02
+
+
+@pytest.mark.processes    # on the real clock: run alone, not beside the test workers
+def test_the_loop_puts_a_busy_overrun_down_to_work_and_a_sleeping_one_to_not_running(daemon):
+    """run() on the real clock: one tick busy for 10 ms, one asleep for 10 ms (5 periods each)."""
+    class Stop:
+        stopped = False
+
+    daemon.master.clock = time.monotonic
+    daemon.config.duration = 0.4
+    tick, count = daemon.tick, [0]
+
+    def stalling_tick(now):
+        count[0] += 1
+        if count[0] == 60:
+            end = time.monotonic() + 0.01
+            while time.monotonic() < end:
+                pass
+        if count[0] == 120:
+            time.sleep(0.01)
+        tick(now)
+
+    causes = daemon.miss_causes
+    noted = {}                       # tick number → the cause its first miss was put down to
+    note = causes.note
+
+    def spying_note(n, *args):
+        before = (causes.woke_late, causes.not_run, causes.working)
+        note(n, *args)
+        after = (causes.woke_late, causes.not_run, causes.working)
+        if after != before:
+            noted.setdefault(count[0], ("woke_late", "not_run", "working")[[a > b for a, b in zip(after, before)].index(True)])
+
+    causes.note = spying_note
+    daemon.tick = stalling_tick
+    summary = daemon.run(Stop())
+    assert noted.get(60) == "working" and noted.get(120) == "not_run"
+    assert summary.misses_working == causes.working and summary.missed + summary.late == (
+        causes.woke_late + causes.not_run + causes.working)

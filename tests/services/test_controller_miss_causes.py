@@ -1,0 +1,33 @@
+"""MissCauses (services/controller/loop_summary.py): a missed or late deadline is put down to the machine
+(the loop woke late, or its period overran without using the CPU for it) or to work (it used the CPU)."""
+from sharedctl.services.controller.loop_summary import MissCauses, Summary
+
+MEDIAN = 0.0006    # s of thread CPU per period, the loop's median
+
+
+def test_a_loop_that_reached_its_clock_in_time_and_woke_late_was_not_run():
+    causes = MissCauses()
+    causes.note(1, reached_clock_in_time=True, period_cpu=5 * MEDIAN, median_cpu=MEDIAN)
+    assert (causes.woke_late, causes.not_run, causes.working) == (1, 0, 0)
+
+
+def test_an_overrun_that_used_little_cpu_was_the_thread_not_running():
+    causes = MissCauses()
+    causes.note(3, reached_clock_in_time=False, period_cpu=1.5 * MEDIAN, median_cpu=MEDIAN)
+    assert (causes.woke_late, causes.not_run, causes.working) == (0, 3, 0)
+
+
+def test_an_overrun_that_used_over_twice_the_median_cpu_was_work():
+    causes = MissCauses()
+    causes.note(2, reached_clock_in_time=False, period_cpu=0.004, median_cpu=MEDIAN)
+    causes.note(1, reached_clock_in_time=False, period_cpu=0.002, median_cpu=MEDIAN)
+    assert (causes.woke_late, causes.not_run, causes.working) == (0, 0, 3)
+    assert causes.working_cpu_p50() == 0.003
+
+
+def test_ticks_on_time_are_not_counted_and_the_summary_line_names_every_cause():
+    causes = MissCauses()
+    causes.note(0, reached_clock_in_time=False, period_cpu=1.0, median_cpu=MEDIAN)
+    assert (causes.woke_late, causes.not_run, causes.working, causes.working_cpu_p50()) == (0, 0, 0, 0.0)
+    line = Summary(misses_woke_late=5, misses_not_run=6, misses_working=7, working_cpu_p50_ms=1.5).line()
+    assert "5 woke late, 6 overran while not running, 7 overran while working (thread CPU p50 1.500 ms)" in line
