@@ -127,6 +127,10 @@ def _floor_section(report: dict, floor: dict) -> list[str]:
 
     rows = [
         ("deadline misses", _fmt(lookup(report, "loop.deadline_misses")), _fmt(floor["deadline_misses"])),
+        ("the daemon's misses by cause: woke late / overran while not running / overran while working (their "
+         "thread CPU p50 µs)",
+         " / ".join(_fmt(lookup(report, f"loop.daemon.misses_{k}")) for k in ("woke_late", "not_run", "working"))
+         + f" ({_fmt(lookup(report, 'loop.daemon.misses_working_cpu_p50_us'))})", ""),
         ("period jitter p50 / p99 µs (the daemon: torque bursts on the bus; the floor: its send instants)",
          f"{_fmt(lookup(report, 'loop.jitter_p50_us'))} / {_fmt(lookup(report, 'loop.jitter_p99_us'))}",
          f"{_fmt(floor['send_jitter_us']['p50'])} / {_fmt(floor['send_jitter_us']['p99'])}"),
