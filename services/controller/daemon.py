@@ -228,9 +228,9 @@ class ControllerDaemon:
                 self.histogram.add(lateness)
                 late = lateness > 0.5 * self.period
                 self.late += late
-                if ticks:
-                    self.miss_causes.note(clock.missed - missed_before + late, reached <= due, period_cpu,
-                                          self.loop_cpu.quantile(0.5))
+                misses = clock.missed - missed_before + late
+                if misses and ticks:      # (the median's cumulative sum only for a tick that missed)
+                    self.miss_causes.note(misses, reached <= due, period_cpu, self.loop_cpu.quantile(0.5))
                 self.master.receive_until(0.0)    # what arrived during the margin and the spin (or a stall)
                 self.await_estimates()
                 now = time.monotonic()
