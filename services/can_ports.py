@@ -51,8 +51,34 @@ def message(arbitration_id: int, is_remote: bool, dlc: int, data: bytes) -> can.
                        data=None if is_remote else data)
 
 
-class BusPort:
+class _Port:
+    """What both ports share: `read`, the frames waiting now, on top of each one's `recv`."""
+
+    UNREADABLE: type = Exception      # what `recv` raises for a frame it cannot read (counted in `bad`)
+    bad: int
+
+    def recv(self, timeout: float) -> Frame | None:
+        raise NotImplementedError
+
+    def read(self, limit: int) -> list[Frame]:
+        """Up to `limit` frames that are waiting, without waiting; unreadable ones counted in `bad`."""
+        out: list[Frame] = []
+        while len(out) < limit:
+            try:
+                frame = self.recv(0.0)
+            except self.UNREADABLE:
+                self.bad += 1
+                continue
+            if frame is None:
+                break
+            out.append(frame)
+        return out
+
+
+class BusPort(_Port):
     """Any python-can bus."""
+
+    UNREADABLE = can.CanError
 
     def __init__(self, bus) -> None:
         self.bus = bus
@@ -69,19 +95,6 @@ class BusPort:
         return Frame(msg.arbitration_id, msg.is_remote_frame, msg.is_extended_id, msg.is_error_frame,
                      msg.dlc, bytes(msg.data), msg.timestamp or time.time(), msg)
 
-    def read(self, limit: int) -> list[Frame]:
-        out: list[Frame] = []
-        while len(out) < limit:
-            try:
-                frame = self.recv(0.0)
-            except can.CanError:
-                self.bad += 1
-                continue
-            if frame is None:
-                break
-            out.append(frame)
-        return out
-
     def forward(self, frame: Frame) -> None:
         self.bus.send(frame.raw)
 
@@ -89,11 +102,13 @@ class BusPort:
         self.bus.send(message(arbitration_id, is_remote, dlc, data), timeout=timeout)
 
 
-class UdpMulticastPort:
+class UdpMulticastPort(_Port):
     """python-can udp_multicast, read and written on its socket directly (same datagram format).
 
-    `send` never waits for buffer space (a full socket buffer raises BlockingIOError, an OSError);
-    `timeout` is accepted for BusPort's signature."""
+    `send` is a `sendto` on the socket as python-can set it up (blocking: a UDP send waits only
+    while the socket's send buffer is full); `timeout` is accepted for BusPort's signature."""
+
+    UNREADABLE = UnreadableDatagram
 
     def __init__(self, bus) -> None:
         mc = bus._multicast
@@ -138,19 +153,6 @@ class UdpMulticastPort:
                 and type(frame.is_remote) is bool and type(frame.is_extended) is bool and type(frame.is_error) is bool):
             raise UnreadableDatagram("not a classic CAN frame: a field of the wrong type")
         return frame
-
-    def read(self, limit: int) -> list[Frame]:
-        out: list[Frame] = []
-        while len(out) < limit:
-            try:
-                frame = self.recv(0.0)
-            except UnreadableDatagram:
-                self.bad += 1
-                continue
-            if frame is None:
-                break
-            out.append(frame)
-        return out
 
     def forward(self, frame: Frame) -> None:
         self.sock.sendto(frame.raw, self.destination)
