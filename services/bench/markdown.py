@@ -108,6 +108,11 @@ def render(report: dict) -> str:
     return "\n".join(out) + "\n"
 
 
+def _frames_per_tick(report: dict):
+    frames, ticks = lookup(report, "loop.daemon.frames_rx"), lookup(report, "loop.daemon.ticks")
+    return frames / ticks if isinstance(frames, int) and isinstance(ticks, int) and ticks > 0 else None
+
+
 def _floor_section(report: dict, floor: dict) -> list[str]:
     """The machine floor: the bare loop's own figures, and the 500 Hz loop beside them (machine_floor.py)."""
     pre = floor.get("pre_send_us", floor.get("work_us"))
@@ -128,9 +133,11 @@ def _floor_section(report: dict, floor: dict) -> list[str]:
     rows = [
         ("deadline misses", _fmt(lookup(report, "loop.deadline_misses")), _fmt(floor["deadline_misses"])),
         ("the daemon's misses by cause: woke late / overran while not running / overran while working (their "
-         "thread CPU p50 µs)",
+         "thread CPU p50 µs; CAN frames and operator messages they handled, p50; CAN frames per period, mean)",
          " / ".join(_fmt(lookup(report, f"loop.daemon.misses_{k}")) for k in ("woke_late", "not_run", "working"))
-         + f" ({_fmt(lookup(report, 'loop.daemon.misses_working_cpu_p50_us'))})", ""),
+         + f" ({_fmt(lookup(report, 'loop.daemon.misses_working_cpu_p50_us'))}; "
+         f"{_fmt(lookup(report, 'loop.daemon.misses_working_frames_p50'))} and "
+         f"{_fmt(lookup(report, 'loop.daemon.misses_working_commands_p50'))}; {_fmt(_frames_per_tick(report))})", ""),
         ("period jitter p50 / p99 µs (the daemon: torque bursts on the bus; the floor: its send instants)",
          f"{_fmt(lookup(report, 'loop.jitter_p50_us'))} / {_fmt(lookup(report, 'loop.jitter_p99_us'))}",
          f"{_fmt(floor['send_jitter_us']['p50'])} / {_fmt(floor['send_jitter_us']['p99'])}"),

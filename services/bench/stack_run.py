@@ -272,12 +272,20 @@ def _daemon_summary(controller: children.Child) -> dict:
             "misses_woke_late": _int_after(r"by cause: (\d+) woke late", tail),
             "misses_not_run": _int_after(r"(\d+) overran while not running", tail),
             "misses_working": _int_after(r"(\d+) overran while working", tail),
-            "misses_working_cpu_p50_us": _ms_after_as_us(r"overran while working \(thread CPU p50 ([\d.]+) ms\)", tail)}
+            "misses_working_cpu_p50_us": _ms_after_as_us(r"overran while working \(thread CPU p50 ([\d.]+) ms", tail),
+            "misses_working_frames_p50": _float_after(r"overran while working \(.*?CAN frames p50 ([\d.]+)", tail),
+            "misses_working_commands_p50": _float_after(r"overran while working \(.*?operator messages p50 ([\d.]+)", tail),
+            "frames_rx": _int_after(r"CAN frames rx (\d+)", tail)}
 
 
 def _ms_after_as_us(pattern: str, text: str) -> float | None:
     match = re.search(pattern, text)
     return float(match.group(1)) * 1e3 if match else None
+
+
+def _float_after(pattern: str, text: str) -> float | None:
+    match = re.search(pattern, text)
+    return float(match.group(1)) if match else None
 
 
 def _int_after(pattern: str, text: str) -> int | None:

@@ -37,6 +37,7 @@ class CommandIntake:
         self.clock, self.wall_clock = clock, wall_clock
         self.pending: deque = deque()
         self.overflowed = 0                      # payloads refused because the queue was full
+        self.taken = 0                           # samples taken from the channel so far
 
     def take(self) -> None:
         """Every sample waiting in the channel into the queue."""
@@ -44,6 +45,7 @@ class CommandIntake:
             sample = self.subscriber.try_recv()
             if sample is None:
                 return
+            self.taken += 1
             self.queue(sample)
 
     def queue(self, sample) -> None:

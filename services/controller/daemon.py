@@ -218,7 +218,7 @@ class ControllerDaemon:
         cpu0, t0 = time.process_time(), time.monotonic()
         self.master.request_arming()
         ticks = 0
-        period_cpu = 0.0
+        period_cpu, period_work = 0.0, (0, 0)
         try:
             while not stop.stopped:
                 reached, due, missed_before = time.monotonic(), clock.next, clock.missed
@@ -230,7 +230,8 @@ class ControllerDaemon:
                 self.late += late
                 misses = clock.missed - missed_before + late
                 if misses and ticks:      # (the median's cumulative sum only for a tick that missed)
-                    self.miss_causes.note(misses, reached <= due, period_cpu, self.loop_cpu.quantile(0.5))
+                    self.miss_causes.note(misses, reached <= due, period_cpu, self.loop_cpu.quantile(0.5), period_work)
+                work_at_tick = (self.master.rx_frames, self.intake.taken)
                 self.master.receive_until(0.0)    # what arrived during the margin and the spin (or a stall)
                 self.await_estimates()
                 now = time.monotonic()
@@ -248,6 +249,7 @@ class ControllerDaemon:
                     clock.next += self.phase_lock.correction(clock.next, arrival)
                 self.receive_until(clock.next - config.spin - RECEIVE_MARGIN)
                 period_cpu = time.thread_time() - cpu_at_tick
+                period_work = (self.master.rx_frames - work_at_tick[0], self.intake.taken - work_at_tick[1])
                 self.loop_cpu.add(period_cpu)
         finally:
             self.shutdown()
@@ -266,6 +268,8 @@ class ControllerDaemon:
             sensor_waits=self.sensor_waits, sensor_wait_timeouts=self.sensor_wait_timeouts,
             misses_woke_late=self.miss_causes.woke_late, misses_not_run=self.miss_causes.not_run,
             misses_working=self.miss_causes.working, working_cpu_p50_ms=self.miss_causes.working_cpu_p50() * 1e3,
+            working_frames_p50=self.miss_causes.working_work_p50()[0],
+            working_commands_p50=self.miss_causes.working_work_p50()[1],
             frames_rx=self.master.rx_frames,
             frames_tx=self.master.tx_frames, bad_frames=self.master.bad_frame_count,
             implausible_estimates=sum(self.master.implausible_estimates.values()),

@@ -67,6 +67,8 @@ class Summary:
     misses_not_run: int = 0
     misses_working: int = 0
     working_cpu_p50_ms: float = 0.0    # the loop thread's CPU in the periods that overran while working
+    working_frames_p50: float = 0.0    # … the CAN frames and operator messages those periods handled
+    working_commands_p50: float = 0.0
 
     def line(self) -> str:
         rej = sum(self.rejections.values())
@@ -85,7 +87,8 @@ class Summary:
             f"estops {self.estops}, torque-limited ticks {self.saturated}; ticks that waited for their wheel "
             f"estimates {self.sensor_waits} ({self.sensor_wait_timeouts} in vain); missed and late deadlines by "
             f"cause: {self.misses_woke_late} woke late, {self.misses_not_run} overran while not running, "
-            f"{self.misses_working} overran while working (thread CPU p50 {self.working_cpu_p50_ms:.3f} ms)"
+            f"{self.misses_working} overran while working (thread CPU p50 {self.working_cpu_p50_ms:.3f} ms, "
+            f"CAN frames p50 {self.working_frames_p50:g}, operator messages p50 {self.working_commands_p50:g})"
         )
 
 
@@ -101,7 +104,8 @@ class MissCauses:
       * overran while not running: its period's work ended after the deadline, yet used no more
         than `WORKING` × the median thread CPU per period: the thread was not run for much of it;
       * overran while working: the work ended after the deadline and used more than that CPU —
-        the loop's own cost, or the vCPU running slower (the CPU figures say which).
+        the loop's own cost, or the vCPU running slower: the work those periods handled (CAN frames,
+        operator messages) beside their CPU says which.
     Counted in the unit of `missed + late`."""
 
     WORKING = 2.0
@@ -110,8 +114,10 @@ class MissCauses:
     not_run: int = 0
     working: int = 0
     working_cpu: list = field(default_factory=list)   # s of thread CPU of each period that overran while working
+    working_work: list = field(default_factory=list)  # (CAN frames, operator messages) each of those handled
 
-    def note(self, count: int, reached_clock_in_time: bool, period_cpu: float, median_cpu: float) -> None:
+    def note(self, count: int, reached_clock_in_time: bool, period_cpu: float, median_cpu: float,
+             work: tuple[int, int] = (0, 0)) -> None:
         if count <= 0:
             return
         if reached_clock_in_time:
@@ -119,8 +125,16 @@ class MissCauses:
         elif period_cpu > self.WORKING * median_cpu:
             self.working += count
             self.working_cpu.append(period_cpu)
+            self.working_work.append(work)
         else:
             self.not_run += count
 
     def working_cpu_p50(self) -> float:
         return float(np.median(self.working_cpu)) if self.working_cpu else 0.0
+
+    def working_work_p50(self) -> tuple[float, float]:
+        """Median CAN frames and operator messages handled in the periods that overran while working."""
+        if not self.working_work:
+            return 0.0, 0.0
+        frames, commands = zip(*self.working_work)
+        return float(np.median(frames)), float(np.median(commands))

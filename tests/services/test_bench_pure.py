@@ -132,7 +132,8 @@ def test_the_causes_of_missed_deadlines_are_read_from_the_summary_line():
     from sharedctl.services.controller.loop_summary import Summary
 
     line = Summary(ticks=9000, elapsed=18.0, rate=500.0, missed=3, late=4, misses_woke_late=2, misses_not_run=4,
-                   misses_working=1, working_cpu_p50_ms=2.25).line()
+                   misses_working=1, working_cpu_p50_ms=2.25, working_frames_p50=7.0, working_commands_p50=1.5,
+                   frames_rx=63000).line()
 
     class Child:
         def tail(self, lines):
@@ -142,3 +143,4 @@ def test_the_causes_of_missed_deadlines_are_read_from_the_summary_line():
     assert (got["missed"], got["late"], got["misses_woke_late"], got["misses_not_run"], got["misses_working"]) == (
         3, 4, 2, 4, 1)
     assert got["misses_working_cpu_p50_us"] == 2250.0
+    assert (got["misses_working_frames_p50"], got["misses_working_commands_p50"], got["frames_rx"]) == (7.0, 1.5, 63000)

@@ -19,10 +19,10 @@ def test_an_overrun_that_used_little_cpu_was_the_thread_not_running():
 
 def test_an_overrun_that_used_over_twice_the_median_cpu_was_work():
     causes = MissCauses()
-    causes.note(2, reached_clock_in_time=False, period_cpu=0.004, median_cpu=MEDIAN)
-    causes.note(1, reached_clock_in_time=False, period_cpu=0.002, median_cpu=MEDIAN)
+    causes.note(2, reached_clock_in_time=False, period_cpu=0.004, median_cpu=MEDIAN, work=(7, 1))
+    causes.note(1, reached_clock_in_time=False, period_cpu=0.002, median_cpu=MEDIAN, work=(9, 3))
     assert (causes.woke_late, causes.not_run, causes.working) == (0, 0, 3)
-    assert causes.working_cpu_p50() == 0.003
+    assert causes.working_cpu_p50() == 0.003 and causes.working_work_p50() == (8.0, 2.0)
 
 
 def test_ticks_on_time_are_not_counted_and_the_summary_line_names_every_cause():
@@ -30,4 +30,5 @@ def test_ticks_on_time_are_not_counted_and_the_summary_line_names_every_cause():
     causes.note(0, reached_clock_in_time=False, period_cpu=1.0, median_cpu=MEDIAN)
     assert (causes.woke_late, causes.not_run, causes.working, causes.working_cpu_p50()) == (0, 0, 0, 0.0)
     line = Summary(misses_woke_late=5, misses_not_run=6, misses_working=7, working_cpu_p50_ms=1.5).line()
-    assert "5 woke late, 6 overran while not running, 7 overran while working (thread CPU p50 1.500 ms)" in line
+    assert "5 woke late, 6 overran while not running, 7 overran while working (thread CPU p50 1.500 ms" in line
+    assert causes.working_work_p50() == (0.0, 0.0)
