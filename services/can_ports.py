@@ -11,8 +11,8 @@ and sends them.
   tests/services/test_can_ports.py), and forwards an unchanged frame by resending its datagram
   as is. Every node of a udp_multicast bus hears every frame, its own included; python-can's
   ``Bus.recv`` (a ``select`` and a full ``Message`` per frame) and ``Bus.send`` (a ``Message``,
-  then a map built from it) cost about 3 µs more per frame than the system call on this
-  machine's figures (docs/performance.md). The fault gateway forwards thousands of frames a
+  then a map built from it) cost 3–4 µs more per frame than this port on this machine
+  (docs/performance.md), whose own cost is mostly the system call. The fault gateway forwards thousands of frames a
   second through it; the controller reads and writes its per-period frames through it.
 * :class:`BusPort` is any other python-can bus (SocketCAN on vcan: the kernel does not echo a
   socket's own frames), through ``recv``/``send``.
