@@ -1,7 +1,8 @@
 """`sharedctl bench [--quick] [--json OUT]`: the performance figures of docs/performance.md, in one run.
 
     control_step_us.{ce,nce,of}.{median,p99}          SharedController.step (control_step.py)
-    loop.{rate_hz,deadline_misses,jitter_p99_us}       500 Hz over CAN with the simulated robot (stack_run.py)
+    loop.{rate_hz,deadline_misses,jitter_p99_us}       500 Hz over CAN with the simulated robot (stack_run.py):
+                                                       3 controllers (6 in the full run) one after the other
     loop_1khz.{…}                                      the same at 1 kHz
     loop_free_running.{…}                              500 Hz with --no-sensor-sync (the default locks ticks to the estimates)
     latency.{sensor_to_torque_us,operator_to_torque_us,zenoh_floor_us,can_floor_us}.{p50,p99}
@@ -10,11 +11,13 @@
     cpu.fraction_of_one_core                           robot + controller at 500 Hz
     machine.{cpu,cores,kernel,python,loadavg_before,loadavg_after}
     machine_floor.{deadline_misses,lateness_us,send_jitter_us,pre_send_wall_us,work_thread_cpu_us,…}
-                                                       a bare loop with the daemon's amounts of work, right after
-                                                       the 500 Hz run (machine_floor.py)
+                                                       a bare loop with the daemon's amounts of work and its CAN
+                                                       I/O, after each controller of the 500 Hz run, beside the
+                                                       same robot, listener and probes (machine_floor.py);
+                                                       machine_floor.turns: each controller beside the loop after it
 
 --markdown OUT writes the same as tables (docs/performance/bench.md); --from-json IN re-renders a saved run.
---quick: 15 s at 500 Hz, 8 s at 1 kHz, shorter step trajectories (under 3 minutes); the full run:
+--quick: 15 s at 500 Hz (+ 15 s of the bare loop), 8 s at 1 kHz, shorter step trajectories (under 3 minutes); the full run:
 60 s and 20 s, plus the step's breakdown, floors, profile and scaling with the number of groups.
 Targets are reported, never enforced: timing depends on the machine and its load.
 """
@@ -31,7 +34,7 @@ from pathlib import Path
 from . import control_step, machine_floor, stack_run
 from .markdown import lookup
 
-FLOOR_WORK_US = 400.0   # µs of CPU per period in the machine-floor loop if the daemon's own figures are missing
+TURNS, QUICK_TURNS = 6, 3   # controllers run in turn with the bare loop in the 500 Hz run (full, --quick)
 
 TARGETS = {
     "control_step_us.ce.median": ("≤", 50.0),
@@ -118,15 +121,10 @@ def collect(quick: bool, skip_stack: bool = False, progress=print) -> dict:
         }
     if not skip_stack:
         seconds, seconds_1k = (15.0, 8.0) if quick else (60.0, 20.0)
-        progress(f"stack at 500 Hz for {seconds:g} s …")
-        run500 = _stack_run(500.0, seconds, progress=progress)
-        daemon = run500["loop"].get("daemon") or {}
-        pre = daemon.get("torque_out_p50_us") or FLOOR_WORK_US
-        work = max(daemon.get("loop_cpu_p50_us") or FLOOR_WORK_US, pre)
-        progress(f"machine floor: a bare 500 Hz loop with the daemon's amounts ({pre:.0f} µs to the send, "
-                 f"{work:.0f} µs per period), {seconds:g} s …")
-        report["machine_floor"] = machine_floor.measure(500.0, seconds, work_us=work, pre_send_us=pre,
-                                                        cpu=run500.get("cpus", {}).get("controller_loop"))
+        turns = QUICK_TURNS if quick else TURNS
+        progress(f"stack at 500 Hz for {seconds:g} s: {turns} controllers in turn with the bare loop on the same bus …")
+        run500 = _stack_run(500.0, seconds, progress=progress, turns=turns, floor=True)
+        report["machine_floor"] = run500.get("machine_floor")
         progress(f"stack at 1 kHz for {seconds_1k:g} s …")
         run1k = _stack_run(1000.0, seconds_1k, probes=False, progress=progress)
         report["loop"] = run500["loop"]

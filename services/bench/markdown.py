@@ -117,9 +117,13 @@ def _floor_section(report: dict, floor: dict) -> list[str]:
     """The machine floor: the bare loop's own figures, and the 500 Hz loop beside them (machine_floor.py)."""
     pre = floor.get("pre_send_us", floor.get("work_us"))
     pinned = f", on CPU {floor['cpu']}" if floor.get("cpu") is not None else ""
-    out = ["", f"Machine floor (machine_floor.py): a bare {_fmt(floor['rate_hz'])} Hz loop in a fresh process, "
-           f"{_fmt(floor['work_us'])} µs of pure-Python work per period ({_fmt(pre)} µs of it before the noted send "
-           f"instant), SCHED_FIFO {'yes' if floor['realtime'] else 'no'}{pinned}, {_fmt(floor['seconds'])} s:", "",
+    turns = floor.get("turns") if isinstance(floor.get("turns"), list) else []
+    where = (f"on the bus, after each of the {len(turns)} controllers of the 500 Hz run, beside the same robot, listener "
+             "and probes, with the amounts of work that controller reported (the last one's below)"
+             if floor.get("on_bus") else "in a fresh process")
+    out = ["", f"Machine floor (machine_floor.py): a bare {_fmt(floor['rate_hz'])} Hz loop {where}, "
+           f"{_fmt(floor['work_us'])} µs of thread CPU per period ({_fmt(pre)} µs of it before the send), "
+           f"SCHED_FIFO {'yes' if floor['realtime'] else 'no'}{pinned}, {_fmt(floor['seconds'])} s in all:", "",
            "| deadline misses (missed / late) | lateness p50 / p99 / max µs | work wall p50 / p99 / max µs | "
            "work thread CPU p50 / p99 / max µs | ticks whose work took over half a period | steal s |",
            "|---:|---:|---:|---:|---:|---:|",
@@ -129,7 +133,9 @@ def _floor_section(report: dict, floor: dict) -> list[str]:
            + f" | {floor['ticks_over_half_period']} | {_fmt(floor['steal_s'])} |", ""]
     if "send_jitter_us" not in floor:
         return out
-
+    on_bus = isinstance(floor.get("bus"), dict)
+    jitter_floor = (f"{_fmt(lookup(floor, 'bus.jitter_p50_us'))} / {_fmt(lookup(floor, 'bus.jitter_p99_us'))}" if on_bus
+                    else f"{_fmt(floor['send_jitter_us']['p50'])} / {_fmt(floor['send_jitter_us']['p99'])}")
     rows = [
         ("deadline misses", _fmt(lookup(report, "loop.deadline_misses")), _fmt(floor["deadline_misses"])),
         ("the daemon's misses by cause: woke late / overran while not running / overran while working (their "
@@ -138,9 +144,8 @@ def _floor_section(report: dict, floor: dict) -> list[str]:
          + f" ({_fmt(lookup(report, 'loop.daemon.misses_working_cpu_p50_us'))}; "
          f"{_fmt(lookup(report, 'loop.daemon.misses_working_frames_p50'))} and "
          f"{_fmt(lookup(report, 'loop.daemon.misses_working_commands_p50'))}; {_fmt(_frames_per_tick(report))})", ""),
-        ("period jitter p50 / p99 µs (the daemon: torque bursts on the bus; the floor: its send instants)",
-         f"{_fmt(lookup(report, 'loop.jitter_p50_us'))} / {_fmt(lookup(report, 'loop.jitter_p99_us'))}",
-         f"{_fmt(floor['send_jitter_us']['p50'])} / {_fmt(floor['send_jitter_us']['p99'])}"),
+        ("period jitter p50 / p99 µs (torque bursts on the bus" + (")" if on_bus else "; the floor: its send instants)"),
+         f"{_fmt(lookup(report, 'loop.jitter_p50_us'))} / {_fmt(lookup(report, 'loop.jitter_p99_us'))}", jitter_floor),
         ("wake-up lateness p99 / max µs",
          f"{_fmt(lookup(report, 'loop.daemon.lateness_p99_us'))} / {_fmt(lookup(report, 'loop.daemon.lateness_max_us'))}",
          f"{_fmt(floor['lateness_us']['p99'])} / {_fmt(floor['lateness_us']['max'])}"),
@@ -155,7 +160,20 @@ def _floor_section(report: dict, floor: dict) -> list[str]:
          _fmt(floor["deadline_to_send_us"]["p99"] + SENSOR_LEAD_US)),
         ("the guest's steal time over the run, s", _fmt(lookup(report, "cpu.steal_s")), _fmt(floor.get("steal_s"))),
     ]
-    out += ["The 500 Hz loop beside its floor (the floor ran right after it, with its amounts of work):", "",
+    when = "in turns with it" if turns else "right after it"
+    several = " (over several controllers: counts summed, p99 the worst controller's, p50 the median)" if turns else ""
+    out += [f"The 500 Hz loop beside its floor (the floor ran {when}, with its amounts of work){several}:", "",
             "| figure | the daemon's loop | the bare loop |", "|---|---:|---:|"]
     out += [f"| {name} | {ours} | {bare} |" for name, ours, bare in rows]
+    if turns:
+        out += ["", "Turn by turn (each controller, then the bare loop for as long as that controller ran):", "",
+                "| turn | misses: daemon (woke late / not running / working) | misses: bare loop | "
+                "jitter p99 µs: daemon / bare loop | thread CPU per period p50 µs: daemon / bare loop | "
+                "steal s: daemon's measurement window / bare loop's whole run |", "|---:|---:|---:|---:|---:|---:|"]
+        for k, t in enumerate(turns, 1):
+            d, f = t["daemon"], t["floor"]
+            out.append(f"| {k} | {_fmt(d['deadline_misses'])} ({_fmt(d['misses_woke_late'])} / {_fmt(d['misses_not_run'])} / "
+                       f"{_fmt(d['misses_working'])}) | {_fmt(f['deadline_misses'])} | {_fmt(d['jitter_p99_us'])} / "
+                       f"{_fmt(f['jitter_p99_us'])} | {_fmt(d['loop_cpu_p50_us'])} / {_fmt(f['loop_cpu_p50_us'])} | "
+                       f"{_fmt(d['steal_s'])} / {_fmt(f['steal_s'])} |")
     return out + [""]

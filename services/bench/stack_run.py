@@ -49,6 +49,7 @@ from sharedctl.protocol.odrive_enums import CommandId
 from .. import can_bus, children, zenoh_session
 from .bus_load import bus_load
 from .hop_probe import PROBE_CAN_ID, PROBE_KEY, unpack_time
+from . import machine_floor
 from .machine_floor import steal_seconds
 from .statistics import group_bursts, missed_periods, percentiles, period_jitter
 
@@ -60,6 +61,8 @@ PROBE_RATE = 500.0         # Hz, each transport probe
 DRIVES_RATE = 500.0        # Hz, the simulated drives' encoder estimates (paper_convex's [robot_sim] default)
 SENSOR_LEAD_US = 250.0     # the controller's sensor lead (its default), passed explicitly: the floor's figures use it
 SETTLE = 2.5               # s after start before the window opens (arming, Zenoh links)
+FLOOR_START_LIMIT = 30.0   # s the floor's process may take beyond its run (start, calibration) before the bench gives up
+FLOOR_WORK_US = 400.0      # µs of CPU per period in the floor's loop where a controller's own figures are missing
 
 SUMMARY = re.compile(
     r"(?P<ticks>\d+) ticks at (?P<rate>[\d.]+) Hz, (?P<missed>\d+) missed / (?P<late>\d+) late deadlines, "
@@ -135,22 +138,53 @@ def cpu_plan() -> dict:
     return {"robot": cpus[0], "controller_loop": cpus[-1]}
 
 
+@dataclass
+class Operator:
+    """The bench's operator: a command every 1/OPERATOR_RATE s, its y deflection flipping sign each time."""
+
+    publisher: object
+    session_id: str = field(default_factory=lambda: os.urandom(8).hex())
+    log: list = field(default_factory=list)
+    seq: int = 0
+    sign: float = 1.0
+    next_at: float = field(default_factory=time.monotonic)
+
+    def run(self, until, on_each=None) -> None:
+        """Send commands until `until()` is true (checked before each); `on_each()` after each."""
+        while not until():
+            self.seq += 1
+            self.sign = -self.sign
+            cmd = _command(self.seq, self.session_id, self.sign)
+            self.publisher.put(encode_message(cmd))
+            self.log.append((cmd.send_time, self.sign))
+            if on_each is not None:
+                on_each()
+            self.next_at = max(self.next_at + 1.0 / OPERATOR_RATE, time.monotonic() - 1.0 / OPERATOR_RATE)
+            time.sleep(max(self.next_at - time.monotonic(), 0.0))
+
+
 def run(rate_hz: float, seconds: float, log_dir: Path | None = None, probes: bool = True,
-        controller_args: tuple[str, ...] = (), pin: bool = True) -> dict:
-    """Start the stack at `rate_hz` for `seconds` of measurement; returns the figures (see module doc)."""
+        controller_args: tuple[str, ...] = (), pin: bool = True, turns: int = 1, floor: bool = False) -> dict:
+    """Start the stack at `rate_hz` for `seconds` of measurement; returns the figures (see module doc).
+
+    `turns` > 1: the controller runs that many times, `seconds / turns` of measurement each, one after the
+    other beside the same robot, listener and probes (each a whole daemon: start, arming, exit). `floor`:
+    after each controller, the bare loop (machine_floor.py) on the same bus and CPU for as long as that
+    controller ran, with the amounts of work it reported; its figures are in `machine_floor`."""
     log_dir = Path(log_dir or tempfile.mkdtemp(prefix="sharedctl-bench-"))
     can_port, probe_port = children.free_udp_port(), children.free_udp_port()
-    z_robot, z_ctrl, z_bench = (f"tcp/127.0.0.1:{zenoh_session.free_loopback_port()}" for _ in range(3))
+    z_robot, z_bench = (f"tcp/127.0.0.1:{zenoh_session.free_loopback_port()}" for _ in range(2))
     can_args = ["--can-interface", "udp_multicast", "--can-option", f"port={can_port}"]
-    total = SETTLE + seconds + 0.5
+    per_turn = seconds / turns
+    daemon_seconds = SETTLE + per_turn + 0.5
+    whole = turns * (daemon_seconds + 10.0) * (2 if floor else 1) + 10.0      # a bound: everything is stopped at the end
     cpus = cpu_plan() if pin else {}
     robot_cpu = ["--cpu", str(cpus["robot"])] if cpus else []
     controller_cpu = ["--cpu", str(cpus["controller_loop"])] if cpus else []
-    started = []
+    started, controllers, daemon_turns, floor_runs = [], [], [], []
     bus = probe_bus = session = None
     listener = probe_listener = None
     zenoh_arrivals: list[tuple[float, float]] = []
-    operator_log: list[tuple[float, float]] = []
     try:
         bus = can_bus.open_bus(can_bus.resolve("udp_multicast", None, {"port": can_port}))
         probe_bus = can_bus.open_bus(can_bus.resolve("udp_multicast", None, {"port": probe_port}))
@@ -158,51 +192,34 @@ def run(rate_hz: float, seconds: float, log_dir: Path | None = None, probes: boo
         listener.start()
         probe_listener.start()
         robot = children.start_child("robot", ["robot", "--scenario", SCENARIO, *can_args, "--zenoh-listen", z_robot,
-                                               "--robot-id", ROBOT_ID, "--duration", f"{total + 1.0:.1f}", *robot_cpu], log_dir)
+                                               "--robot-id", ROBOT_ID, "--duration", f"{whole:.1f}", *robot_cpu], log_dir)
         started.append(robot)
         robot_priority = children.raise_priority(robot.popen.pid)
-        controller = children.start_child("controller", [
-            "controller", "--scenario", SCENARIO, *can_args, "--zenoh-listen", z_ctrl, "--robot-id", ROBOT_ID,
-            "--rate", f"{rate_hz:g}", "--duration", f"{total:.1f}", "--quiet", "--sensor-lead-us", f"{SENSOR_LEAD_US:g}",
-            *controller_cpu, *controller_args], log_dir)
-        started.append(controller)
-        for child, endpoint in ((robot, z_robot), (controller, z_ctrl)):
-            if not children.wait_listening(endpoint, child, 20.0):
-                raise RuntimeError(f"{child.name} did not start (log: {child.log})")
+        if not children.wait_listening(z_robot, robot, 20.0):
+            raise RuntimeError(f"robot did not start (log: {robot.log})")
         robot_priority = _realtime(robot.popen.pid) or robot_priority
-        session = zenoh_session.open_session([z_bench], [z_ctrl])
-        publisher = session.declare_publisher(keys.operator_cmd_key(ROBOT_ID))
+        session = zenoh_session.open_session([z_bench], [])        # each controller connects to it
+        operator = Operator(session.declare_publisher(keys.operator_cmd_key(ROBOT_ID)))
         subscriber = session.declare_subscriber(
             PROBE_KEY, lambda sample: zenoh_arrivals.append((time.time(), unpack_time(sample.payload.to_bytes()))))
         if probes:
-            started.append(_start_probe("zenoh_probe", ["zenoh", z_bench, f"{total:.1f}", f"{PROBE_RATE:g}"], log_dir))
-            started.append(_start_probe("can_probe", ["can", str(probe_port), f"{total:.1f}", f"{PROBE_RATE:g}"], log_dir))
-
-        session_id = os.urandom(8).hex()
-        t0 = time.monotonic()
-        window = (time.time() + SETTLE, time.time() + SETTLE + seconds)
-        cpu_start = cpu_end = None
-        seq, sign = 0, 1.0
-        next_cmd = time.monotonic()
-        while time.monotonic() - t0 < SETTLE + seconds:
-            if cpu_start is None and time.time() >= window[0]:
-                cpu_start = (time.monotonic(), {c.name: _cpu_seconds(c.popen.pid) for c in (robot, controller)},
-                             steal_seconds())
-            seq += 1
-            sign = -sign
-            cmd = _command(seq, session_id, sign)
-            publisher.put(encode_message(cmd))
-            operator_log.append((cmd.send_time, sign))
-            next_cmd += 1.0 / OPERATOR_RATE
-            time.sleep(max(next_cmd - time.monotonic(), 0.0))
-        cpu_end = (time.monotonic(), {c.name: _cpu_seconds(c.popen.pid) for c in (robot, controller)}, steal_seconds())
-        for child in started:
-            try:
-                child.popen.wait(timeout=5.0)
-            except Exception:  # noqa: BLE001 — stopped below
-                pass
+            started.append(_start_probe("zenoh_probe", ["zenoh", z_bench, f"{whole:.1f}", f"{PROBE_RATE:g}"], log_dir))
+            started.append(_start_probe("can_probe", ["can", str(probe_port), f"{whole:.1f}", f"{PROBE_RATE:g}"], log_dir))
+        for turn in range(turns):
+            name = "controller" if turns == 1 else f"controller_{turn + 1}"
+            z_ctrl = f"tcp/127.0.0.1:{zenoh_session.free_loopback_port()}"
+            controller = children.start_child(name, [
+                "controller", "--scenario", SCENARIO, *can_args, "--zenoh-listen", z_ctrl, "--zenoh-connect", z_bench,
+                "--robot-id", ROBOT_ID, "--rate", f"{rate_hz:g}", "--duration", f"{daemon_seconds:.1f}", "--quiet",
+                "--sensor-lead-us", f"{SENSOR_LEAD_US:g}", *controller_cpu, *controller_args], log_dir)
+            started.append(controller)
+            controllers.append(controller)
+            daemon_turns.append(_daemon_turn(controller, z_ctrl, robot, operator, per_turn))
+            if floor:
+                floor_runs.append(_floor_turn(daemon_turns[-1]["summary"], operator, rate_hz, daemon_seconds,
+                                              cpus.get("controller_loop"), can_port))
         subscriber.undeclare()
-        publisher.undeclare()
+        operator.publisher.undeclare()
     finally:
         for child in started:
             child.stop()
@@ -215,19 +232,76 @@ def run(rate_hz: float, seconds: float, log_dir: Path | None = None, probes: boo
         for b in (bus, probe_bus):
             if b is not None:
                 b.shutdown()
-    summary = _daemon_summary(controller)
-    figures = analyse(listener.frames, operator_log, window, rate_hz, summary)
-    figures["cpu"] = _cpu(cpu_start, cpu_end)
+    windows = [t["window"] for t in daemon_turns]
+    figures = analyse_turns(listener.frames, operator.log, windows, rate_hz, [t["summary"] for t in daemon_turns])
+    figures["cpu"] = _cpu_turns([t["cpu"] for t in daemon_turns])
+    inside = lambda t: any(lo <= t <= hi for lo, hi in windows)   # noqa: E731
     figures["latency"]["zenoh_floor_us"] = percentiles(
-        [arrived - sent for arrived, sent in zenoh_arrivals if window[0] <= sent <= window[1]], 1e6)
+        [arrived - sent for arrived, sent in zenoh_arrivals if inside(sent)], 1e6)
     probe = [f for f in probe_listener.frames if f.can_id == PROBE_CAN_ID and f.dlc == 8]
-    figures["latency"]["can_floor_us"] = percentiles(
-        [f.t - unpack_time(f.data) for f in probe if window[0] <= f.t <= window[1]], 1e6)
+    figures["latency"]["can_floor_us"] = percentiles([f.t - unpack_time(f.data) for f in probe if inside(f.t)], 1e6)
+    if floor_runs:
+        figures["machine_floor"] = dict(
+            machine_floor.figures(floor_runs),
+            bus=analyse_turns(listener.frames, [], [r["window"] for r in floor_runs], rate_hz, [{}] * len(floor_runs))["loop"],
+            turns=[_turn_pair(listener.frames, rate_hz, t, r) for t, r in zip(daemon_turns, floor_runs)])
     figures["processes"] = {c.name: c.report() for c in started}
     figures["robot_priority"] = robot_priority
     figures["cpus"] = cpus
     figures["log_dir"] = str(log_dir)
     return figures
+
+
+def _daemon_turn(controller: children.Child, z_ctrl: str, robot: children.Child, operator: Operator,
+                 seconds: float) -> dict:
+    """One controller from its start to its exit, the operator sending throughout; the window opens SETTLE s
+    after it listens."""
+    if not children.wait_listening(z_ctrl, controller, 20.0):
+        raise RuntimeError(f"{controller.name} did not start (log: {controller.log})")
+    opens = time.time() + SETTLE
+    window = (opens, opens + seconds)
+    marks = []
+
+    def mark() -> None:
+        if len(marks) == 0 and time.time() >= window[0] or len(marks) == 1 and time.time() >= window[1]:
+            marks.append((time.monotonic(), {c.name: _cpu_seconds(c.popen.pid) for c in (robot, controller)},
+                          steal_seconds()))
+
+    operator.run(lambda: len(marks) == 2, mark)
+    operator.run(lambda: controller.popen.poll() is not None or time.time() > window[1] + 10.0)
+    return {"window": window, "summary": _daemon_summary(controller), "cpu": (marks[0], marks[1])}
+
+
+def _floor_turn(summary: dict, operator: Operator, rate_hz: float, seconds: float, cpu: int | None,
+                can_port: int) -> dict:
+    """The bare loop on the bus for `seconds`, with the amounts of work of the controller before it (its
+    median tick start → torques computed, its output instant, and its median thread CPU per period), the
+    operator sending throughout."""
+    pre = summary.get("torque_ready_p50_us") or summary.get("torque_out_p50_us") or FLOOR_WORK_US
+    work = max(summary.get("loop_cpu_p50_us") or FLOOR_WORK_US, pre)
+    hold = summary.get("torque_at_us") or 0.0
+    with machine_floor.run(rate_hz, seconds, work_us=work, pre_send_us=pre, cpu=cpu, can_port=can_port,
+                           hold_us=hold) as loop:
+        give_up = time.monotonic() + seconds + FLOOR_START_LIMIT
+        operator.run(lambda: loop.done() or time.monotonic() > give_up)
+        return loop.result(max(give_up - time.monotonic(), 0.0) + 1.0)
+
+
+def _turn_pair(frames: list[Frame], rate_hz: float, daemon: dict, floor: dict) -> dict:
+    """One controller and the bare loop after it, side by side."""
+    summary = daemon["summary"]
+    floor_loop = analyse_turns(frames, [], [floor["window"]], rate_hz, [{}])["loop"]
+    daemon_loop = analyse_turns(frames, [], [daemon["window"]], rate_hz, [summary])["loop"]
+    cpu = _cpu_turns([daemon["cpu"]])
+    return {
+        "daemon": {"deadline_misses": daemon_loop["deadline_misses"], "jitter_p99_us": daemon_loop["jitter_p99_us"],
+                   "misses_woke_late": summary.get("misses_woke_late"), "misses_not_run": summary.get("misses_not_run"),
+                   "misses_working": summary.get("misses_working"), "steal_s": cpu.get("steal_s"),
+                   "loop_cpu_p50_us": summary.get("loop_cpu_p50_us")},
+        "floor": {"deadline_misses": floor["missed"] + floor["late"], "jitter_p99_us": floor_loop["jitter_p99_us"],
+                  "steal_s": floor["steal_s"],
+                  "loop_cpu_p50_us": float(np.median(floor["samples"]["cpu"])) / 1e3 if floor["ticks"] else None},
+    }
 
 
 def _realtime(pid: int) -> str | None:
@@ -275,7 +349,10 @@ def _daemon_summary(controller: children.Child) -> dict:
             "misses_working_cpu_p50_us": _ms_after_as_us(r"overran while working \(thread CPU p50 ([\d.]+) ms", tail),
             "misses_working_frames_p50": _float_after(r"overran while working \(.*?CAN frames p50 ([\d.]+)", tail),
             "misses_working_commands_p50": _float_after(r"overran while working \(.*?operator messages p50 ([\d.]+)", tail),
-            "frames_rx": _int_after(r"CAN frames rx (\d+)", tail)}
+            "frames_rx": _int_after(r"CAN frames rx (\d+)", tail),
+            "torque_ready_p50_us": _ms_after_as_us(r"torques computed p50 ([\d.]+) ms", tail),
+            "torque_ready_p99_us": _ms_after_as_us(r"torques computed p50 [\d.]+ ms p99 ([\d.]+) ms", tail),
+            "torque_at_us": 0.0 if "sent as soon as computed" in tail else _ms_after_as_us(r"sent at deadline \+ ([\d.]+) ms", tail)}
 
 
 def _ms_after_as_us(pattern: str, text: str) -> float | None:
@@ -293,55 +370,110 @@ def _int_after(pattern: str, text: str) -> int | None:
     return int(match.group(1)) if match else None
 
 
-def _cpu(start, end) -> dict:
-    if start is None or end is None:
-        return {"fraction_of_one_core": None}
-    wall = end[0] - start[0]
-    per = {name: (end[1][name] - start[1][name]) / wall
-           for name in end[1] if end[1][name] is not None and start[1].get(name) is not None}
-    steal = None if start[2] is None or end[2] is None else end[2] - start[2]
+def _cpu_turns(turns) -> dict:
+    """Robot + controller CPU over the windows of one or more turns ((start, end) marks each), as a fraction of
+    the windows' wall time; the guest's steal summed over them."""
+    wall, used, steal = 0.0, {}, 0.0
+    for start, end in turns:
+        if start is None or end is None:
+            return {"fraction_of_one_core": None}
+        wall += end[0] - start[0]
+        for name, after in end[1].items():
+            key = "controller" if name.startswith("controller") else name
+            before = start[1].get(name)
+            if after is not None and before is not None:
+                used[key] = used.get(key, 0.0) + after - before
+        steal = None if steal is None or start[2] is None or end[2] is None else steal + end[2] - start[2]
+    per = {name: seconds / wall for name, seconds in used.items()} if wall > 0 else {}
     return {"fraction_of_one_core": sum(per.values()) if per else None, "per_process": per, "window_s": wall,
             "steal_s": steal}
 
 
+def merge_summaries(summaries: list[dict]) -> dict:
+    """The controllers' summary lines as one: counts summed; of each percentile, the worst turn's (p99, max)
+    or the median of the turns' (p50) — labelled so in docs/performance.md. One summary stays as it is."""
+    if len(summaries) == 1 or not all(summaries):     # one missing line: no sum at all (the bus counts instead)
+        return summaries[0] if len(summaries) == 1 else {}
+    out = {}
+    for key in summaries[0]:
+        values = [s.get(key) for s in summaries]
+        if any(v is None for v in values):
+            out[key] = None
+        elif key == "rate_hz":
+            out[key] = float(np.average(values, weights=[s["ticks"] for s in summaries]))
+        elif isinstance(values[0], int):
+            out[key] = int(sum(values))
+        elif "_p99" in key or "_max" in key:
+            out[key] = max(values)
+        else:
+            out[key] = float(np.median(values))
+    out["turns"] = len(summaries)
+    return out
+
+
 def analyse(frames: list[Frame], operator_log, window, rate_hz: float, summary: dict) -> dict:
     """The loop, latency and bus-load figures from the frames seen on the bus in `window`."""
-    lo, hi = window
+    return analyse_turns(frames, operator_log, [window], rate_hz, [summary])
+
+
+def analyse_turns(frames: list[Frame], operator_log, windows, rate_hz: float, summaries: list[dict]) -> dict:
+    """`analyse` over several windows (one controller each, `summaries` theirs): every interval, age and latency
+    is taken within one window, never across the gap between two; the samples are then pooled."""
     period = 1.0 / rate_hz
+    parts = [_window(frames, operator_log, w, period, s) for w, s in zip(windows, summaries)]
+    pool = lambda name: np.concatenate([np.asarray(p[name], dtype=float) for p in parts])   # noqa: E731
+    summary = merge_summaries(summaries)
+    missed_bus = sum(p["missed_bus"] for p in parts)
+    span = sum(p["span"] for p in parts)
+    jitter = pool("jitter")
+    loop = {
+        "rate_hz": sum(len(p["bursts"]) - 1 for p in parts if len(p["bursts"]) > 1) / span if span > 0 else 0.0,
+        "deadline_misses": (summary["missed"] + summary["late"]) if summary else missed_bus,
+        "jitter_p99_us": percentiles(jitter, 1e6)["p99"],
+        "jitter_p50_us": percentiles(jitter, 1e6)["p50"],
+        "periods_without_torque_on_bus": missed_bus,
+        "drives_send_jitter_us": percentiles(pool("drives_jitter"), 1e6),
+        "bursts": sum(len(p["bursts"]) for p in parts),
+        "daemon": summary,
+        "sensor_age_excludes_compute_us": float(np.median([p["compute"] for p in parts])) * 1e6 if parts else 0.0,
+    }
+    if len(parts) > 1:
+        loop["daemon_turns"] = [s for s in summaries]
+    seconds = sum(hi - lo for lo, hi in windows)
+    inside = [f for p in parts for f in p["inside"]]
+    load = bus_load([(f.dlc, f.remote, f.extended) for f in inside if f.can_id != PROBE_CAN_ID], seconds)
+    counts = {k: sum(p["counts"][k] for p in parts) for k in ("torque", "encoder", "all")}
+    return {
+        "loop": loop,
+        "latency": {"sensor_to_torque_us": percentiles(pool("sensor"), 1e6),
+                    "operator_to_torque_us": percentiles(pool("operator"), 1e6)},
+        "bus_load": {"fraction_1mbit": load, "frames_per_s": {k: v / seconds for k, v in counts.items()}},
+    }
+
+
+def _window(frames: list[Frame], operator_log, window, period: float, summary: dict) -> dict:
+    """The samples of one window: torque bursts, their period jitter and missing periods, the drives' send
+    jitter, sensor ages, operator latencies, and the frames inside it."""
+    lo, hi = window
     inside = [f for f in frames if lo <= f.t <= hi]
     torque = [f for f in inside if not f.remote and (f.can_id & 0x1F) == CommandId.SET_INPUT_TORQUE]
     encoder = [f for f in inside if not f.remote and (f.can_id & 0x1F) == CommandId.GET_ENCODER_ESTIMATES]
     bursts = group_bursts([f.t for f in torque], 0.25 * period)
     burst_set = set(bursts)
     first_frames = [f for f in torque if f.t in burst_set]
-    jitter = period_jitter(bursts, period)
-    missed_bus = missed_periods(bursts, period)
-    loop = {
-        "rate_hz": (len(bursts) - 1) / (bursts[-1] - bursts[0]) if len(bursts) > 1 else 0.0,
-        "deadline_misses": (summary["missed"] + summary["late"]) if summary else missed_bus,
-        "jitter_p99_us": percentiles(jitter, 1e6)["p99"],
-        "jitter_p50_us": percentiles(jitter, 1e6)["p50"],
-        "periods_without_torque_on_bus": missed_bus,
-        "drives_send_jitter_us": percentiles(period_jitter(group_bursts([f.t for f in encoder], 0.25 / DRIVES_RATE),
-                                                           1.0 / DRIVES_RATE), 1e6),
-        "bursts": len(bursts),
-        "daemon": summary,
-    }
     # frames that arrived after the tick started were not used by it: the tick started the daemon's median
     # "torque out" time (tick start → frames handed to the bus) before the burst; an older daemon reports
     # only its whole compute time (which includes the telemetry after the send)
     before_send = (summary.get("torque_out_p50_us") or summary.get("compute_p50_us", 0.0)) if summary else 0.0
     compute = before_send * 1e-6
-    loop["sensor_age_excludes_compute_us"] = compute * 1e6
-    sensor = _sensor_ages(bursts, encoder, compute)
-    operator = _operator_latencies(first_frames, torque, operator_log, period)
-    seconds = hi - lo
-    load = bus_load([(f.dlc, f.remote, f.extended) for f in inside if f.can_id != PROBE_CAN_ID], seconds)
-    counts = {"torque": len(torque), "encoder": len(encoder), "all": len(inside)}
+    operator = [(t, s) for t, s in operator_log if lo <= t <= hi]
     return {
-        "loop": loop,
-        "latency": {"sensor_to_torque_us": percentiles(sensor, 1e6), "operator_to_torque_us": percentiles(operator, 1e6)},
-        "bus_load": {"fraction_1mbit": load, "frames_per_s": {k: v / seconds for k, v in counts.items()}},
+        "bursts": bursts, "span": bursts[-1] - bursts[0] if len(bursts) > 1 else 0.0,
+        "jitter": period_jitter(bursts, period), "missed_bus": missed_periods(bursts, period),
+        "drives_jitter": period_jitter(group_bursts([f.t for f in encoder], 0.25 / DRIVES_RATE), 1.0 / DRIVES_RATE),
+        "compute": compute, "sensor": _sensor_ages(bursts, encoder, compute),
+        "operator": _operator_latencies(first_frames, torque, operator, period),
+        "inside": inside, "counts": {"torque": len(torque), "encoder": len(encoder), "all": len(inside)},
     }
 
 

@@ -65,7 +65,16 @@ from .wheel_kinematics import WheelKinematics
 
 ROLE = "controller"
 RECEIVE_SLICE = 5e-4          # s: the loop takes and judges operator commands at least this often between ticks
+TORQUE_AT = 3.5e-4             # s: the default output instant after a tick's deadline (docs/performance.md) …
+TORQUE_AT_SHARE = 0.35         # … at most this share of the period
+
 RECEIVE_MARGIN = 2e-4         # s: reading CAN frames stops this long before the clock's final spin (the rest: next tick)
+
+
+def default_torque_at(rate: float) -> float:
+    """The default output instant after each deadline (s) at `rate` Hz: TORQUE_AT, at most TORQUE_AT_SHARE
+    of the period."""
+    return min(TORQUE_AT, TORQUE_AT_SHARE / rate)
 
 
 class Mode(enum.Enum):
@@ -91,7 +100,8 @@ class DaemonConfig:
     sensor_lead: float = 2.5e-4         # s after the estimates' arrival at which a synchronised tick starts
     sensor_wait: float = 5e-4           # s a synchronised tick waits, at most, for its period's estimates (0: never)
     spin: float = 1e-4                  # s before each deadline polled instead of slept (lifecycle.RateClock)
-    torque_at: float = 0.0              # s after its deadline at which a tick sends its torques (0: once computed)
+    torque_at: float = 3.5e-4           # s after its deadline at which a tick sends its torques (0: once computed);
+    #                                     the CLI's default: TORQUE_AT, at most TORQUE_AT_SHARE of the period
     lease_mode: str = LeaseMode.IMPLICIT  # implicit: a command takes a free lease; explicit: only a take (lease.py)
     lease_expiry: float = DEFAULT_EXPIRY  # s without commands/takes from the holder → lease free
     max_command_age: float = DEFAULT_MAX_AGE  # s later than the session's best delivery → stale (replay_guard.py)
@@ -143,6 +153,7 @@ class ControllerDaemon:
         self.histogram = LatenessHistogram()     # tick lateness (jitter)
         self.compute = LatenessHistogram()       # tick compute time (control + telemetry)
         self.torque_out = LatenessHistogram()    # tick start → Set_Input_Torque frames handed to the bus
+        self.torque_ready = LatenessHistogram()  # tick start → torques computed (before `torque_at` holds them)
         self.sensor_to_torque = LatenessHistogram()   # arrival of the oldest estimate a tick used → its torque frames sent
         self.loop_cpu = LatenessHistogram()      # the loop thread's CPU time per period, outside the clock's wait
         self.late = 0
@@ -262,6 +273,8 @@ class ControllerDaemon:
             cpu_percent=100.0 * cpu / elapsed if elapsed > 0 else 0.0,
             compute_p50_ms=self.compute.quantile(0.5) * 1e3, compute_p99_ms=self.compute.quantile(0.99) * 1e3,
             torque_out_p50_ms=self.torque_out.quantile(0.5) * 1e3, torque_out_p99_ms=self.torque_out.quantile(0.99) * 1e3,
+            torque_ready_p50_ms=self.torque_ready.quantile(0.5) * 1e3,
+            torque_ready_p99_ms=self.torque_ready.quantile(0.99) * 1e3, torque_at_ms=config.torque_at * 1e3,
             loop_cpu_p50_ms=self.loop_cpu.quantile(0.5) * 1e3, loop_cpu_p99_ms=self.loop_cpu.quantile(0.99) * 1e3,
             sensor_to_torque_p50_ms=self.sensor_to_torque.quantile(0.5) * 1e3,
             sensor_to_torque_p99_ms=self.sensor_to_torque.quantile(0.99) * 1e3,
@@ -404,6 +417,7 @@ class ControllerDaemon:
             tau = tuple(t * scale for t in tau)
             self.saturated += 1
         self.out, self.u_s, self.tau = out, out.u_s, np.array(tau)
+        self.torque_ready.add(time.monotonic() - now)
         if self.config.torque_at > 0.0:
             hold_until((now if self.deadline is None else self.deadline) + self.config.torque_at, self.config.spin)
         self.master.send_torques(tau)

@@ -48,6 +48,9 @@ class Summary:
     compute_p99_ms: float = 0.0
     torque_out_p50_ms: float = 0.0
     torque_out_p99_ms: float = 0.0
+    torque_ready_p50_ms: float = 0.0   # tick start → torques computed (before the output instant holds them)
+    torque_ready_p99_ms: float = 0.0
+    torque_at_ms: float = 0.0          # the output instant after each deadline (0: as soon as computed)
     sensor_to_torque_p50_ms: float = 0.0   # arrival of the oldest wheel estimate a tick used → its torque frames sent
     sensor_to_torque_p99_ms: float = 0.0
     loop_cpu_p50_ms: float = 0.0       # the loop thread's CPU time per period outside the clock's wait
@@ -88,7 +91,9 @@ class Summary:
             f"estimates {self.sensor_waits} ({self.sensor_wait_timeouts} in vain); missed and late deadlines by "
             f"cause: {self.misses_woke_late} woke late, {self.misses_not_run} overran while not running, "
             f"{self.misses_working} overran while working (thread CPU p50 {self.working_cpu_p50_ms:.3f} ms, "
-            f"CAN frames p50 {self.working_frames_p50:g}, operator messages p50 {self.working_commands_p50:g})"
+            f"CAN frames p50 {self.working_frames_p50:g}, operator messages p50 {self.working_commands_p50:g}); "
+            f"torques computed p50 {self.torque_ready_p50_ms:.3f} ms p99 {self.torque_ready_p99_ms:.3f} ms, "
+            + (f"sent at deadline + {self.torque_at_ms:.3f} ms" if self.torque_at_ms > 0 else "sent as soon as computed")
         )
 
 

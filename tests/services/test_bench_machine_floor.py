@@ -33,3 +33,24 @@ def test_the_send_instant_splits_the_work_and_gives_a_period_jitter():
     assert floor["send_jitter_us"]["p50"] >= 0.0
     whole = machine_floor.measure(rate_hz=500.0, seconds=0.1, work_us=30.0)
     assert whole["pre_send_us"] == 30.0     # by default the instant is at the end of the work
+
+
+def test_on_the_bus_the_floor_sends_three_torque_frames_a_tick_at_the_output_instant():
+    from sharedctl.protocol.odrive_enums import CommandId
+    from sharedctl.services import can_bus, children
+
+    port = children.free_udp_port()
+    bus = can_bus.open_bus(can_bus.resolve("udp_multicast", None, {"port": port}))
+    try:
+        floor = machine_floor.measure(rate_hz=500.0, seconds=0.3, work_us=300.0, pre_send_us=50.0, can_port=port,
+                                      hold_us=250.0)
+        torque = 0
+        while (msg := bus.recv(timeout=0.2)) is not None:
+            torque += (msg.arbitration_id & 0x1F) == CommandId.SET_INPUT_TORQUE and msg.data[:4] == b"\0\0\0\0"
+    finally:
+        bus.shutdown()
+    warm_up = int(machine_floor.IO_WARM_UP * 500.0)
+    assert floor["on_bus"] and torque == 3 * (floor["ticks"] + warm_up)
+    assert all(v > 0.0 for v in floor["io_thread_cpu_us"].values())
+    # the frames leave at deadline + 250 µs, never before, though the work before them is 50 µs
+    assert floor["deadline_to_send_us"]["p50"] >= 250.0 and floor["hold_us"] == 250.0

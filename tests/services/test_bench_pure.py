@@ -10,7 +10,7 @@ import pytest
 from sharedctl.protocol.odrive_enums import CommandId
 from sharedctl.services.bench.bus_load import bus_load, frame_bits
 from sharedctl.services.bench.command import check_targets, finite_or_null
-from sharedctl.services.bench.stack_run import Frame, analyse
+from sharedctl.services.bench.stack_run import Frame, analyse, analyse_turns
 from sharedctl.services.bench.statistics import group_bursts, missed_periods, percentiles, period_jitter
 
 
@@ -144,3 +144,75 @@ def test_the_causes_of_missed_deadlines_are_read_from_the_summary_line():
         3, 4, 2, 4, 1)
     assert got["misses_working_cpu_p50_us"] == 2250.0
     assert (got["misses_working_frames_p50"], got["misses_working_commands_p50"], got["frames_rx"]) == (7.0, 1.5, 63000)
+
+
+def test_the_output_instant_and_the_compute_before_it_are_read_from_the_summary_line():
+    from sharedctl.services.bench.stack_run import _daemon_summary
+    from sharedctl.services.controller.loop_summary import Summary
+
+    class Child:
+        def __init__(self, line):
+            self.line = line
+
+        def tail(self, lines):
+            return self.line + "\n"
+
+    held = Summary(ticks=10, torque_ready_p50_ms=0.21, torque_ready_p99_ms=0.48, torque_at_ms=0.35).line()
+    at_once = Summary(ticks=10, torque_ready_p50_ms=0.2).line()
+    got, plain = _daemon_summary(Child(held)), _daemon_summary(Child(at_once))
+    assert (got["torque_ready_p50_us"], got["torque_ready_p99_us"], got["torque_at_us"]) == (210.0, 480.0, 350.0)
+    assert plain["torque_at_us"] == 0.0 and plain["torque_ready_p50_us"] == 200.0
+
+
+def test_several_controllers_summaries_are_summed_and_their_percentiles_labelled_worst_or_median():
+    from sharedctl.services.bench.stack_run import merge_summaries
+
+    a = {"ticks": 100, "rate_hz": 500.0, "missed": 1, "late": 2, "lateness_p99_us": 50.0, "torque_out_p50_us": 200.0,
+         "misses_working_cpu_p50_us": None}
+    b = {"ticks": 300, "rate_hz": 400.0, "missed": 3, "late": 0, "lateness_p99_us": 90.0, "torque_out_p50_us": 260.0,
+         "misses_working_cpu_p50_us": 2000.0}
+    c = dict(b, torque_out_p50_us=220.0)
+    got = merge_summaries([a, b, c])
+    assert (got["ticks"], got["missed"], got["late"], got["turns"]) == (700, 7, 2, 3)
+    assert got["lateness_p99_us"] == 90.0 and got["torque_out_p50_us"] == 220.0
+    assert got["rate_hz"] == pytest.approx((100 * 500 + 600 * 400) / 700)
+    assert got["misses_working_cpu_p50_us"] is None          # not known for every controller: not made up
+    assert merge_summaries([a]) is a
+    assert merge_summaries([a, {}]) == {}                    # one line missing: no sum that undercounts
+
+
+def test_turns_are_analysed_window_by_window_never_across_the_gap_between_them():
+    """Two 0.2 s windows of perfect 500 Hz bursts, 0.3 s apart, on a phase that does not continue across the
+    gap: no interval spans the gap, so the jitter stays 0 and no period counts as missed."""
+    period, frames = 0.002, []
+    for start in (0.0, 0.5003):
+        for k in range(100):
+            t = start + 0.001 + k * period
+            for node in range(3):
+                frames.append(_frame(t - 0.0003, node, CommandId.GET_ENCODER_ESTIMATES))
+                frames.append(_frame(t + 1e-5 * node, node, CommandId.SET_INPUT_TORQUE, struct.pack("<f", 1.0)))
+    windows = [(0.0, 0.2), (0.5003, 0.7003)]
+    one = {"missed": 1, "late": 0, "torque_out_p50_us": 250.0}
+    got = analyse_turns(frames, [], windows, 500.0, [one, dict(one, missed=2)])
+    assert got["loop"]["jitter_p99_us"] == pytest.approx(0.0, abs=1e-3)
+    assert got["loop"]["periods_without_torque_on_bus"] == 0
+    assert got["loop"]["bursts"] == 200 and got["loop"]["rate_hz"] == pytest.approx(500.0)
+    assert got["loop"]["deadline_misses"] == 3                 # the controllers' own counts, summed
+    assert got["latency"]["sensor_to_torque_us"]["n"] == 200
+    joined = analyse(frames, [], (0.0, 0.7003), 500.0, {})    # one window over the gap: the gap shows
+    assert joined["loop"]["periods_without_torque_on_bus"] > 100
+
+
+def test_the_floor_figures_pool_runs_without_an_interval_across_them():
+    from sharedctl.services.bench.machine_floor import figures
+
+    def run(first_sent_ns, misses):
+        n = 50
+        return {"rate_hz": 500.0, "seconds": 0.1, "work_us": 100.0, "pre_send_us": 50.0, "hold_us": 0.0,
+                "realtime": False, "cpu": None, "on_bus": False, "ticks": n, "missed": misses, "late": 1,
+                "steal_s": 0.01, "samples": {"lateness": np.zeros(n), "wall": np.full(n, 1e5), "cpu": np.full(n, 1e5),
+                                             "sent": first_sent_ns + 2e6 * np.arange(n), "pre_wall": np.full(n, 5e4)}}
+
+    got = figures([run(0.0, 2), run(7.3e9, 0)])
+    assert (got["ticks"], got["missed"], got["late"], got["deadline_misses"], got["runs"]) == (100, 2, 2, 4, 2)
+    assert got["send_jitter_us"]["max"] == 0.0 and got["steal_s"] == pytest.approx(0.02)

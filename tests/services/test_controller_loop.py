@@ -314,6 +314,26 @@ def test_with_torque_at_the_torque_frames_leave_that_long_after_the_ticks_deadli
     assert len(sent_at) == 3 and min(sent_at) >= daemon.deadline + 0.02
 
 
+def test_the_default_output_instant_is_350_us_after_the_deadline_and_at_most_35_percent_of_the_period():
+    from sharedctl.services.controller.daemon import default_torque_at
+
+    assert default_torque_at(500.0) == pytest.approx(350e-6)
+    assert default_torque_at(1000.0) == pytest.approx(350e-6)
+    assert default_torque_at(2000.0) == pytest.approx(175e-6)
+    assert DaemonConfig(robot_id="unit").torque_at == pytest.approx(default_torque_at(500.0))
+
+
+def test_a_tick_reports_when_its_torques_were_ready_apart_from_when_they_left(daemon):
+    """The summary's "torques computed" is the time before the output instant holds the frames."""
+    arm(daemon)
+    daemon.config.torque_at = 0.02
+    now = daemon.deadline = time.monotonic()
+    feed(daemon, now, heartbeat=False)
+    daemon.tick(now)
+    assert daemon.mode is Mode.RUNNING
+    assert daemon.torque_ready.quantile(0.5) < 0.02 <= daemon.torque_out.quantile(0.5) + 1e-3
+
+
 @pytest.mark.processes    # on the real clock: run alone, not beside the test workers
 def test_the_loop_puts_a_busy_overrun_down_to_work_and_a_sleeping_one_to_not_running(daemon):
     """run() on the real clock: one tick busy for 10 ms, one asleep for 10 ms (5 periods each)."""
