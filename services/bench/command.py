@@ -31,7 +31,7 @@ import platform
 import time
 from pathlib import Path
 
-from . import control_step, machine_floor, stack_run
+from . import control_step, stack_run
 from .markdown import lookup
 
 TURNS, QUICK_TURNS = 6, 3   # controllers run in turn with the bare loop in the 500 Hz run (full, --quick)

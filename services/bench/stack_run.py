@@ -29,6 +29,7 @@ timestamps over Zenoh and over a second udp_multicast port: the transport floors
 """
 from __future__ import annotations
 
+import gc
 import os
 import re
 import struct
@@ -165,6 +166,22 @@ class Operator:
 
 def run(rate_hz: float, seconds: float, log_dir: Path | None = None, probes: bool = True,
         controller_args: tuple[str, ...] = (), pin: bool = True, turns: int = 1, floor: bool = False) -> dict:
+    """`_run` with this process's cyclic garbage collector off (as `timeit` does): the listener's list of
+    frames grows to hundreds of thousands of objects, over which a full collection held the GIL for
+    40–95 ms — the bench's operator sent nothing meanwhile and then a burst. Frames hold no cycles;
+    reference counting frees them."""
+    enabled = gc.isenabled()
+    gc.collect()
+    gc.disable()
+    try:
+        return _run(rate_hz, seconds, log_dir, probes, controller_args, pin, turns, floor)
+    finally:
+        if enabled:
+            gc.enable()
+
+
+def _run(rate_hz: float, seconds: float, log_dir: Path | None, probes: bool, controller_args: tuple[str, ...],
+         pin: bool, turns: int, floor: bool) -> dict:
     """Start the stack at `rate_hz` for `seconds` of measurement; returns the figures (see module doc).
 
     `turns` > 1: the controller runs that many times, `seconds / turns` of measurement each, one after the
@@ -245,6 +262,7 @@ def run(rate_hz: float, seconds: float, log_dir: Path | None = None, probes: boo
             machine_floor.figures(floor_runs),
             bus=analyse_turns(listener.frames, [], [r["window"] for r in floor_runs], rate_hz, [{}] * len(floor_runs))["loop"],
             turns=[_turn_pair(listener.frames, rate_hz, t, r) for t, r in zip(daemon_turns, floor_runs)])
+    figures["windows"] = windows
     figures["processes"] = {c.name: c.report() for c in started}
     figures["robot_priority"] = robot_priority
     figures["cpus"] = cpus

@@ -1,4 +1,6 @@
 """The 500 Hz run of `sharedctl bench` in turns (services/bench/stack_run.py): its bookkeeping, never its timing."""
+import gc
+
 import pytest
 
 from sharedctl.services.bench import stack_run
@@ -7,7 +9,9 @@ pytestmark = pytest.mark.processes      # starts the robot, two controllers and 
 
 
 def test_controllers_and_bare_loops_take_turns_beside_one_robot_and_every_process_is_reaped():
+    assert gc.isenabled()
     figures = stack_run.run(500.0, 2.0, probes=False, turns=2, floor=True)
+    assert gc.isenabled()            # the run turns the collector off for itself only
     processes = figures["processes"]
     assert set(processes) == {"robot", "controller_1", "controller_2"}
     assert all(p["exit_code"] is not None and not p["killed"] for p in processes.values())
