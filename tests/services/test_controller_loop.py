@@ -323,15 +323,24 @@ def test_the_default_output_instant_is_350_us_after_the_deadline_and_at_most_35_
     assert DaemonConfig(robot_id="unit").torque_at == pytest.approx(default_torque_at(500.0))
 
 
-def test_a_tick_reports_when_its_torques_were_ready_apart_from_when_they_left(daemon):
-    """The summary's "torques computed" is the time before the output instant holds the frames."""
+def test_a_tick_reports_when_its_torques_were_ready_apart_from_when_they_left(daemon, monkeypatch):
+    """The summary's "torques computed" is taken before the output instant holds the frames, "torque out"
+    after they left: at the hold, the one is counted and the other not yet (no clock involved)."""
+    from sharedctl.services.controller import daemon as daemon_module
+
+    at_hold = []
+    monkeypatch.setattr(daemon_module, "hold_until", lambda t, spin: at_hold.append(
+        (daemon.torque_ready.n, daemon.torque_out.n, t, len(daemon.master.bus.take()))))
     arm(daemon)
     daemon.config.torque_at = 0.02
-    now = daemon.deadline = time.monotonic()
-    feed(daemon, now, heartbeat=False)
-    daemon.tick(now)
+    daemon.deadline = 10.002
+    feed(daemon, 10.004, heartbeat=False)
+    daemon.master.bus.take()
+    daemon.tick(10.004)
     assert daemon.mode is Mode.RUNNING
-    assert daemon.torque_ready.quantile(0.5) < 0.02 <= daemon.torque_out.quantile(0.5) + 1e-3
+    # ready counted, out not yet, nothing sent yet; the hold asked for deadline + torque_at
+    assert at_hold == [(1, 0, pytest.approx(10.022), 0)]
+    assert (daemon.torque_ready.n, daemon.torque_out.n) == (1, 1) and len(daemon.master.bus.take()) == 3
 
 
 @pytest.mark.processes    # on the real clock: run alone, not beside the test workers
