@@ -4,7 +4,11 @@ One run: `sharedctl robot` and `sharedctl controller --rate R` (paper_convex, ud
 private port, Zenoh on private loopback ports) as child processes; this process listens on the
 same bus (udp_multicast delivers every frame to every listener, kernel-stamped on arrival) and
 plays the operator over Zenoh. In the same run, two probe processes (hop_probe.py) send bare
-timestamps over Zenoh and over a second udp_multicast port: the transport floors.
+timestamps over Zenoh and over a second udp_multicast port: the transport floors. With `turns`,
+the controller is started that many times one after the other (each connects to this process's
+Zenoh endpoint), and with `floor` the bare loop of machine_floor.py runs on the same bus after each;
+every figure is taken window by window (`analyse_turns`), and this process's garbage collector is
+off for the run (its operator must not pause).
 
 * loop: torque bursts (three Set_Input_Torque frames per tick) on the bus → rate, period jitter
   |Δt − T| and periods without a burst; the daemon's own summary line (missed/late ticks, wake-up
@@ -198,7 +202,7 @@ def _run(rate_hz: float, seconds: float, log_dir: Path | None, probes: bool, con
     cpus = cpu_plan() if pin else {}
     robot_cpu = ["--cpu", str(cpus["robot"])] if cpus else []
     controller_cpu = ["--cpu", str(cpus["controller_loop"])] if cpus else []
-    started, controllers, daemon_turns, floor_runs = [], [], [], []
+    started, daemon_turns, floor_runs = [], [], []
     bus = probe_bus = session = None
     listener = probe_listener = None
     zenoh_arrivals: list[tuple[float, float]] = []
@@ -230,7 +234,6 @@ def _run(rate_hz: float, seconds: float, log_dir: Path | None, probes: bool, con
                 "--robot-id", ROBOT_ID, "--rate", f"{rate_hz:g}", "--duration", f"{daemon_seconds:.1f}", "--quiet",
                 "--sensor-lead-us", f"{SENSOR_LEAD_US:g}", *controller_cpu, *controller_args], log_dir)
             started.append(controller)
-            controllers.append(controller)
             daemon_turns.append(_daemon_turn(controller, z_ctrl, robot, operator, per_turn))
             if floor:
                 floor_runs.append(_floor_turn(daemon_turns[-1]["summary"], operator, rate_hz, daemon_seconds,

@@ -216,3 +216,10 @@ def test_the_floor_figures_pool_runs_without_an_interval_across_them():
     got = figures([run(0.0, 2), run(7.3e9, 0)])
     assert (got["ticks"], got["missed"], got["late"], got["deadline_misses"], got["runs"]) == (100, 2, 2, 4, 2)
     assert got["send_jitter_us"]["max"] == 0.0 and got["steal_s"] == pytest.approx(0.02)
+
+
+def test_the_bare_loop_reads_frames_on_the_daemons_schedule():
+    from sharedctl.services.bench import machine_floor
+    from sharedctl.services.controller import daemon
+
+    assert (machine_floor.RECEIVE_MARGIN, machine_floor.RECEIVE_SLICE) == (daemon.RECEIVE_MARGIN, daemon.RECEIVE_SLICE)
