@@ -237,7 +237,11 @@ class FloorProcess:
         """The raw run (for `figures`); raises what the loop raised, or RuntimeError if none came in `timeout` s."""
         if not self.pipe.poll(timeout):
             raise RuntimeError(f"the floor's loop sent nothing in {timeout:.0f} s (exit code {self.process.exitcode})")
-        raw = self.pipe.recv()
+        try:
+            raw = self.pipe.recv()
+        except EOFError:
+            self.process.join(1.0)
+            raise RuntimeError(f"the floor's loop sent nothing: its process ended (exit code {self.process.exitcode})") from None
         if isinstance(raw, BaseException):
             raise raw
         return raw

@@ -54,3 +54,16 @@ def test_on_the_bus_the_floor_sends_three_torque_frames_a_tick_at_the_output_ins
     assert all(v > 0.0 for v in floor["io_thread_cpu_us"].values())
     # the frames leave at deadline + 250 µs, never before, though the work before them is 50 µs
     assert floor["deadline_to_send_us"]["p50"] >= 250.0 and floor["hold_us"] == 250.0
+
+
+def test_a_floor_loop_that_fails_or_dies_is_reported_never_waited_for():
+    with machine_floor.run(rate_hz=0.0, seconds=0.1) as loop:          # 1 / 0 inside the loop's process
+        with pytest.raises(RuntimeError, match="ZeroDivisionError"):
+            loop.result(60.0)
+    with machine_floor.run(rate_hz=500.0, seconds=30.0) as loop:
+        loop.process.kill()                                            # its own child, by its handle
+        loop.process.join()
+        assert loop.done()
+        with pytest.raises(RuntimeError, match="sent nothing"):
+            loop.result(0.5)
+    assert not loop.process.is_alive()
