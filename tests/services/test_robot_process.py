@@ -344,8 +344,10 @@ def test_ground_truth_is_published_on_zenoh_from_the_initial_pose(robot):
     assert [str(k) for k in tokens] == [keys.alive_key("robot1", "robot")]
     assert len(messages) >= 20
     assert messages[-1].q == pytest.approx((-0.9, 3.0, 0.0))              # paper_convex [initial] q, at rest
-    span = messages[-1].time - messages[0].time
-    assert span == pytest.approx((len(messages) - 1) / 100.0, abs=0.03)     # 100 Hz
+    # never faster than 100 Hz: consecutive simulated times at least a period apart, less one physics step
+    # (the rate itself, and no burst after a stall: test_robot_simulation.py, on a synthetic clock; a
+    # stall of this host would lengthen an interval here, so none is bounded from above)
+    assert all(b.time - a.time >= 0.01 - 1e-3 - 1e-9 for a, b in zip(messages, messages[1:]))
     assert all(b.seq == a.seq + 1 for a, b in zip(messages, messages[1:]))
 
 

@@ -92,3 +92,16 @@ def test_a_long_stall_is_skipped_not_replayed():
 def test_frames_for_other_nodes_are_ignored():
     sim = simulation()
     assert sim.receive(cs.PollRequest(7, CommandId.GET_TORQUES), 0.0) == []
+
+
+def test_a_cyclic_schedule_fires_once_per_period_and_never_in_a_burst_after_a_stall():
+    """The rate of the truth messages (and of heartbeats and encoder estimates), on a synthetic clock."""
+    from sharedctl.services.robot.simulation import Schedule
+
+    schedule = Schedule(100.0)
+    fired = [k / 1000.0 for k in range(1000) if schedule.due(k / 1000.0)]     # 1 s polled at 1 kHz
+    assert len(fired) == 100
+    assert [round(b - a, 9) for a, b in zip(fired, fired[1:])] == [0.01] * 99
+    # a 55 ms stall: one message when the loop runs again, then the period from there — no catch-up burst
+    after = [t for t in (1.055 + k / 1000.0 for k in range(30)) if schedule.due(t)]
+    assert [round(t, 9) for t in after] == [1.055, 1.065, 1.075]
