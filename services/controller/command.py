@@ -6,7 +6,7 @@
                          [--rate 500] [--telemetry-rate 50] [--torque-limit 60] [--duration S]
                          [--feedback-timeout-ms 50] [--priority realtime|high|normal] [--quiet]
                          [--[no-]sensor-sync] [--sensor-lead-us 250] [--sensor-wait-us T/4] [--spin-us 100]
-                         [--torque-at-us 350] [--cpu N]
+                         [--torque-at-us 0] [--cpu N]
                          [--lease implicit|explicit] [--lease-expiry-ms 1000] [--max-command-age-ms 500]
                          [--max-clock-skew-ms MS]
 """
@@ -25,7 +25,7 @@ from ..security import zenoh_config
 from ..lifecycle import StopFlag
 from ..service_config import add_argument as add_service_config_argument
 from ..scenario_files import load
-from .daemon import ControllerDaemon, DaemonConfig, default_torque_at
+from .daemon import ControllerDaemon, DaemonConfig
 from .priority import LEVELS, keep_off_cpu, make_loop_realtime, pin_to_cpu, raise_nice
 from ..recording.launch import add_argument as add_record_argument, open_process_recording, summary_line
 
@@ -64,10 +64,10 @@ def add_parser(subparsers) -> None:
     p.add_argument("--spin-us", type=float, default=100.0,
                    help="poll the clock for this long before each deadline instead of sleeping (default 100; "
                         "0: plain sleep; costs at most this much CPU per tick)")
-    p.add_argument("--torque-at-us", type=float,
+    p.add_argument("--torque-at-us", type=float, default=0.0,
                    help="send each tick's torque frames this long after its deadline, or at once if the tick is still "
-                        "computing then (time-triggered output: the same actuation delay every period, unless the "
-                        "computation runs longer; default 350, at most 35 %% of the period; 0: as soon as computed)")
+                        "computing then (time-triggered output: the same actuation delay every period; 0, the "
+                        "default: as soon as computed — the hold sleeps, and an overloaded host can oversleep it)")
     p.add_argument("--cpu", type=int, metavar="N",
                    help="run the loop thread on CPU N alone and keep the process's other threads (Zenoh, CAN) off it "
                         "(default: no pinning; docs/performance.md)")
@@ -94,8 +94,6 @@ def run(args) -> int:
         robot_id = check_robot_id(args.robot_id)
         if not (args.rate > 0 and args.telemetry_rate > 0 and args.torque_limit > 0 and args.feedback_timeout_ms > 0):
             raise ValueError("--rate, --telemetry-rate, --torque-limit and --feedback-timeout-ms must be positive")
-        if args.torque_at_us is None:
-            args.torque_at_us = default_torque_at(args.rate) * 1e6
         if not all(0.0 <= value < 1e6 / args.rate for value in (args.spin_us, args.sensor_lead_us, args.torque_at_us)):
             raise ValueError("--spin-us, --sensor-lead-us and --torque-at-us must be ≥ 0 and shorter than the "
                              "control period")

@@ -14,9 +14,9 @@ the reading past it). Timing (docs/performance.md): the next deadline is locked 
 wheel estimates arrive (phase.py, on by default); the last `spin` before it is polled rather than
 slept (`RateClock`); a tick whose estimates are late waits for them, briefly (`sensor_wait`);
 operator commands wait in a Zenoh channel that the loop polls (command_intake.py: no Python
-callback thread, so none can hold the GIL when the loop wakes); a tick's torque frames are held
-until `torque_at` after its deadline (time-triggered output, 350 µs by default) unless it is still
-computing then; a warm-up step runs and
+callback thread, so none can hold the GIL when the loop wakes); with `torque_at` a tick's torque
+frames are held until that long after its deadline (time-triggered output; off by default: the
+hold sleeps between the computation and the send, docs/performance.md); a warm-up step runs and
 `gc.freeze()` is called before the clock starts. RobotState goes out at the telemetry
 rate, events when something changes (rate-limited), a Heartbeat message at 1 Hz and a
 liveliness token for as long as the daemon runs.
@@ -66,16 +66,8 @@ from .wheel_kinematics import WheelKinematics
 
 ROLE = "controller"
 RECEIVE_SLICE = 5e-4          # s: the loop takes and judges operator commands at least this often between ticks
-TORQUE_AT = 3.5e-4             # s: the default output instant after a tick's deadline (docs/performance.md) …
-TORQUE_AT_SHARE = 0.35         # … at most this share of the period
 
 RECEIVE_MARGIN = 2e-4         # s: reading CAN frames stops this long before the clock's final spin (the rest: next tick)
-
-
-def default_torque_at(rate: float) -> float:
-    """The default output instant after each deadline (s) at `rate` Hz: TORQUE_AT, at most TORQUE_AT_SHARE
-    of the period."""
-    return min(TORQUE_AT, TORQUE_AT_SHARE / rate)
 
 
 class Mode(enum.Enum):
@@ -101,8 +93,7 @@ class DaemonConfig:
     sensor_lead: float = 2.5e-4         # s after the estimates' arrival at which a synchronised tick starts
     sensor_wait: float = 5e-4           # s a synchronised tick waits, at most, for its period's estimates (0: never)
     spin: float = 1e-4                  # s before each deadline polled instead of slept (lifecycle.RateClock)
-    torque_at: float = TORQUE_AT        # s after its deadline at which a tick sends its torques (0: once computed);
-    #                                     the CLI's default: TORQUE_AT, at most TORQUE_AT_SHARE of the period
+    torque_at: float = 0.0              # s after its deadline at which a tick sends its torques (0: once computed)
     lease_mode: str = LeaseMode.IMPLICIT  # implicit: a command takes a free lease; explicit: only a take (lease.py)
     lease_expiry: float = DEFAULT_EXPIRY  # s without commands/takes from the holder → lease free
     max_command_age: float = DEFAULT_MAX_AGE  # s later than the session's best delivery → stale (replay_guard.py)

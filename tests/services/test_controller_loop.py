@@ -314,13 +314,11 @@ def test_with_torque_at_the_torque_frames_leave_that_long_after_the_ticks_deadli
     assert len(sent_at) == 3 and min(sent_at) >= daemon.deadline + 0.02
 
 
-def test_the_default_output_instant_is_350_us_after_the_deadline_and_at_most_35_percent_of_the_period():
-    from sharedctl.services.controller.daemon import default_torque_at
+def test_by_default_the_torques_leave_as_soon_as_computed():
+    from sharedctl.services import cli
 
-    assert default_torque_at(500.0) == pytest.approx(350e-6)
-    assert default_torque_at(1000.0) == pytest.approx(350e-6)
-    assert default_torque_at(2000.0) == pytest.approx(175e-6)
-    assert DaemonConfig(robot_id="unit").torque_at == pytest.approx(default_torque_at(500.0))
+    assert DaemonConfig(robot_id="unit").torque_at == 0.0
+    assert cli.build_parser().parse_args(["controller"]).torque_at_us == 0.0
 
 
 def test_a_tick_reports_when_its_torques_were_ready_apart_from_when_they_left(daemon, monkeypatch):
