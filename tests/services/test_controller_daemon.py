@@ -285,7 +285,8 @@ def test_operator_commands_drive_the_robot_and_telemetry_reports_them(robot, dae
         np.testing.assert_allclose(s.u_s, s.u_h, atol=1e-9, err_msg=f"{s} {[e.text for e in events]}")  # transparent
         assert len(s.group_classes) == 4 and s.theta_hat and len(s.wheel_torques) == 3
         assert s.link.staleness_ms < 300 and s.link.can_feedback_age_ms < 50 and not s.estop_active
-        np.testing.assert_allclose(s.q, robot.q_at(s.time), atol=0.01)      # odometry tracks the plant
+        # odometry tracks the plant: the pose at the time of the wheel estimates the state was computed from
+        np.testing.assert_allclose(s.q, robot.q_at(s.time - s.link.can_feedback_age_ms / 1e3), atol=0.01)
         assert any(e.kind.value == "rejection" for e in events)
 
         t_estop = time.monotonic()
