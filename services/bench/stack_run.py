@@ -416,8 +416,14 @@ def merge_summaries(summaries: list[dict]) -> dict:
     if len(summaries) == 1 or not all(summaries):     # one missing line: no sum at all (the bus counts instead)
         return summaries[0] if len(summaries) == 1 else {}
     out = {}
+    known = all(s.get("misses_working") is not None for s in summaries)
+    working = [s for s in summaries if s.get("misses_working")] if known else summaries
     for key in summaries[0]:
-        values = [s.get(key) for s in summaries]
+        # what the overrunning periods used and handled: only the controllers that had such periods say
+        values = [s.get(key) for s in (working if key.startswith("misses_working_") else summaries)]
+        if not values:
+            out[key] = 0.0
+            continue
         if any(v is None for v in values):
             out[key] = None
         elif key == "rate_hz":

@@ -223,3 +223,12 @@ def test_the_bare_loop_reads_frames_on_the_daemons_schedule():
     from sharedctl.services.controller import daemon
 
     assert (machine_floor.RECEIVE_MARGIN, machine_floor.RECEIVE_SLICE) == (daemon.RECEIVE_MARGIN, daemon.RECEIVE_SLICE)
+
+
+def test_the_work_of_overrunning_periods_comes_only_from_controllers_that_had_them():
+    from sharedctl.services.bench.stack_run import merge_summaries
+
+    quiet = {"ticks": 100, "rate_hz": 500.0, "misses_working": 0, "misses_working_cpu_p50_us": 0.0}
+    busy = {"ticks": 100, "rate_hz": 500.0, "misses_working": 10, "misses_working_cpu_p50_us": 2900.0}
+    assert merge_summaries([quiet, quiet, busy])["misses_working_cpu_p50_us"] == 2900.0
+    assert merge_summaries([quiet, quiet])["misses_working_cpu_p50_us"] == 0.0
