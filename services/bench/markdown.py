@@ -169,11 +169,18 @@ def _floor_section(report: dict, floor: dict) -> list[str]:
         out += ["", "Turn by turn (each controller, then the bare loop for as long as that controller ran):", "",
                 "| turn | misses: daemon (woke late / not running / working) | misses: bare loop | "
                 "jitter p99 µs: daemon / bare loop | thread CPU per period p50 µs: daemon / bare loop | "
-                "steal s: daemon's measurement window / bare loop's whole run |", "|---:|---:|---:|---:|---:|---:|"]
+                "steal s: daemon's measurement window / bare loop's whole run | the daemon's first misses, s after its "
+                "loop started (cause) |", "|---:|---:|---:|---:|---:|---:|---|"]
         for k, t in enumerate(turns, 1):
             d, f = t["daemon"], t["floor"]
             out.append(f"| {k} | {_fmt(d['deadline_misses'])} ({_fmt(d['misses_woke_late'])} / {_fmt(d['misses_not_run'])} / "
                        f"{_fmt(d['misses_working'])}) | {_fmt(f['deadline_misses'])} | {_fmt(d['jitter_p99_us'])} / "
                        f"{_fmt(f['jitter_p99_us'])} | {_fmt(d['loop_cpu_p50_us'])} / {_fmt(f['loop_cpu_p50_us'])} | "
-                       f"{_fmt(d['steal_s'])} / {_fmt(f['steal_s'])} |")
+                       f"{_fmt(d['steal_s'])} / {_fmt(f['steal_s'])} | {_miss_times(d.get('miss_times'))} |")
     return out + [""]
+
+
+def _miss_times(times) -> str:
+    if times is None:
+        return "—"
+    return ", ".join(f"{t:.2f} ({cause})" for t, cause in times) or "none"

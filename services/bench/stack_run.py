@@ -318,7 +318,7 @@ def _turn_pair(frames: list[Frame], rate_hz: float, daemon: dict, floor: dict) -
         "daemon": {"deadline_misses": daemon_loop["deadline_misses"], "jitter_p99_us": daemon_loop["jitter_p99_us"],
                    "misses_woke_late": summary.get("misses_woke_late"), "misses_not_run": summary.get("misses_not_run"),
                    "misses_working": summary.get("misses_working"), "steal_s": cpu.get("steal_s"),
-                   "loop_cpu_p50_us": summary.get("loop_cpu_p50_us")},
+                   "loop_cpu_p50_us": summary.get("loop_cpu_p50_us"), "miss_times": summary.get("miss_times")},
         "floor": {"deadline_misses": floor["missed"] + floor["late"], "jitter_p99_us": floor_loop["jitter_p99_us"],
                   "steal_s": floor["steal_s"],
                   "loop_cpu_p50_us": float(np.median(floor["samples"]["cpu"])) / 1e3 if floor["ticks"] else None},
@@ -373,7 +373,16 @@ def _daemon_summary(controller: children.Child) -> dict:
             "frames_rx": _int_after(r"CAN frames rx (\d+)", tail),
             "torque_ready_p50_us": _ms_after_as_us(r"torques computed p50 ([\d.]+) ms", tail),
             "torque_ready_p99_us": _ms_after_as_us(r"torques computed p50 [\d.]+ ms p99 ([\d.]+) ms", tail),
-            "torque_at_us": 0.0 if "sent as soon as computed" in tail else _ms_after_as_us(r"sent at deadline \+ ([\d.]+) ms", tail)}
+            "torque_at_us": 0.0 if "sent as soon as computed" in tail else _ms_after_as_us(r"sent at deadline \+ ([\d.]+) ms", tail),
+            "miss_times": _miss_times(tail)}
+
+
+def _miss_times(text: str) -> list | None:
+    """The summary line's "first misses at: 0.312 s (working), …" as [[0.312, "working"], …] (None: not said)."""
+    match = re.search(r"first misses at: ([^\n]*)", text)
+    if not match:
+        return None
+    return [[float(t), cause] for t, cause in re.findall(r"([\d.]+) s \(([a-z ]+)\)", match.group(1))]
 
 
 def _ms_after_as_us(pattern: str, text: str) -> float | None:
@@ -426,6 +435,8 @@ def merge_summaries(summaries: list[dict]) -> dict:
             continue
         if any(v is None for v in values):
             out[key] = None
+        elif isinstance(values[0], list):
+            out[key] = [item for value in values for item in value]
         elif key == "rate_hz":
             out[key] = float(np.average(values, weights=[s["ticks"] for s in summaries]))
         elif isinstance(values[0], int):

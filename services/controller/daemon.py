@@ -233,7 +233,8 @@ class ControllerDaemon:
                 self.late += late
                 misses = clock.missed - missed_before + late
                 if misses and ticks:      # (the median's cumulative sum only for a tick that missed)
-                    self.miss_causes.note(misses, reached <= due, period_cpu, self.loop_cpu.quantile(0.5), period_work)
+                    self.miss_causes.note(misses, reached <= due, period_cpu, self.loop_cpu.quantile(0.5), period_work,
+                                          at=reached - t0)
                 work_at_tick = (self.master.rx_frames, self.intake.taken)
                 self.master.receive_until(0.0)    # what arrived during the margin and the spin (or a stall)
                 self.await_estimates()
@@ -274,7 +275,7 @@ class ControllerDaemon:
             misses_woke_late=self.miss_causes.woke_late, misses_not_run=self.miss_causes.not_run,
             misses_working=self.miss_causes.working, working_cpu_p50_ms=self.miss_causes.working_cpu_p50() * 1e3,
             working_frames_p50=self.miss_causes.working_work_p50()[0],
-            working_commands_p50=self.miss_causes.working_work_p50()[1],
+            working_commands_p50=self.miss_causes.working_work_p50()[1], miss_times=tuple(self.miss_causes.times),
             frames_rx=self.master.rx_frames,
             frames_tx=self.master.tx_frames, bad_frames=self.master.bad_frame_count,
             implausible_estimates=sum(self.master.implausible_estimates.values()),

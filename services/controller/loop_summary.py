@@ -72,6 +72,7 @@ class Summary:
     working_cpu_p50_ms: float = 0.0    # the loop thread's CPU in the periods that overran while working
     working_frames_p50: float = 0.0    # … the CAN frames and operator messages those periods handled
     working_commands_p50: float = 0.0
+    miss_times: tuple = ()             # (s since the loop started, cause) of the first missed/late deadlines
 
     def line(self) -> str:
         rej = sum(self.rejections.values())
@@ -94,6 +95,7 @@ class Summary:
             f"CAN frames p50 {self.working_frames_p50:g}, operator messages p50 {self.working_commands_p50:g}); "
             f"torques computed p50 {self.torque_ready_p50_ms:.3f} ms p99 {self.torque_ready_p99_ms:.3f} ms, "
             + (f"sent at deadline + {self.torque_at_ms:.3f} ms" if self.torque_at_ms > 0 else "sent as soon as computed")
+            + "; first misses at: " + (", ".join(f"{t:.3f} s ({cause})" for t, cause in self.miss_times) or "none")
         )
 
 
@@ -111,28 +113,36 @@ class MissCauses:
       * overran while working: the work ended after the deadline and used more than that CPU —
         the loop's own cost, or the vCPU running slower: the work those periods handled (CAN frames,
         operator messages) beside their CPU says which.
-    Counted in the unit of `missed + late`."""
+    Counted in the unit of `missed + late`. The first `KEEP` are kept with the time they happened
+    (`at`, s since the loop started): whether misses come at start-up or anywhere says which work to look at."""
 
     WORKING = 2.0
+    KEEP = 12
 
     woke_late: int = 0
     not_run: int = 0
     working: int = 0
     working_cpu: list = field(default_factory=list)   # s of thread CPU of each period that overran while working
     working_work: list = field(default_factory=list)  # (CAN frames, operator messages) each of those handled
+    times: list = field(default_factory=list)         # (at, cause) of the first KEEP notes
 
     def note(self, count: int, reached_clock_in_time: bool, period_cpu: float, median_cpu: float,
-             work: tuple[int, int] = (0, 0)) -> None:
+             work: tuple[int, int] = (0, 0), at: float | None = None) -> None:
         if count <= 0:
             return
         if reached_clock_in_time:
             self.woke_late += count
+            cause = "woke late"
         elif period_cpu > self.WORKING * median_cpu:
             self.working += count
             self.working_cpu.append(period_cpu)
             self.working_work.append(work)
+            cause = "working"
         else:
             self.not_run += count
+            cause = "not running"
+        if at is not None and len(self.times) < self.KEEP:
+            self.times.append((at, cause))
 
     def working_cpu_p50(self) -> float:
         return float(np.median(self.working_cpu)) if self.working_cpu else 0.0

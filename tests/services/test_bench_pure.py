@@ -144,6 +144,29 @@ def test_the_causes_of_missed_deadlines_are_read_from_the_summary_line():
         3, 4, 2, 4, 1)
     assert got["misses_working_cpu_p50_us"] == 2250.0
     assert (got["misses_working_frames_p50"], got["misses_working_commands_p50"], got["frames_rx"]) == (7.0, 1.5, 63000)
+    assert got["miss_times"] == []
+
+
+def test_the_first_misses_times_are_read_from_the_summary_line_and_merged_over_controllers():
+    from sharedctl.services.bench.markdown import _miss_times
+    from sharedctl.services.bench.stack_run import _daemon_summary, merge_summaries
+    from sharedctl.services.controller.loop_summary import Summary
+
+    class Child:
+        def __init__(self, line):
+            self.line = line
+
+        def tail(self, lines):
+            return self.line + "\n"
+
+    line = Summary(ticks=10, missed=1, late=1, miss_times=((0.3125, "working"), (12.0, "not running"))).line()
+    got = _daemon_summary(Child(line))
+    assert got["miss_times"] == [[0.312, "working"], [12.0, "not running"]]
+    assert _daemon_summary(Child(line.split("; first misses")[0]))["miss_times"] is None    # an older line
+    merged = merge_summaries([got, dict(got, miss_times=[[1.5, "woke late"]])])
+    assert merged["miss_times"] == [[0.312, "working"], [12.0, "not running"], [1.5, "woke late"]]
+    assert _miss_times(got["miss_times"]) == "0.31 (working), 12.00 (not running)"
+    assert (_miss_times([]), _miss_times(None)) == ("none", "—")
 
 
 def test_the_output_instant_and_the_compute_before_it_are_read_from_the_summary_line():

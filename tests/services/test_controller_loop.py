@@ -365,9 +365,9 @@ def test_the_loop_puts_a_busy_overrun_down_to_work_and_a_sleeping_one_to_not_run
     noted = {}                       # tick number → the cause its first miss was put down to
     note = causes.note
 
-    def spying_note(n, *args):
+    def spying_note(n, *args, **kwargs):
         before = (causes.woke_late, causes.not_run, causes.working)
-        note(n, *args)
+        note(n, *args, **kwargs)
         after = (causes.woke_late, causes.not_run, causes.working)
         if after != before:
             noted.setdefault(count[0], ("woke_late", "not_run", "working")[[a > b for a, b in zip(after, before)].index(True)])
@@ -378,3 +378,6 @@ def test_the_loop_puts_a_busy_overrun_down_to_work_and_a_sleeping_one_to_not_run
     assert noted.get(60) == "working" and noted.get(120) == "not_run"
     assert summary.misses_working == causes.working and summary.missed + summary.late == (
         causes.woke_late + causes.not_run + causes.working)
+    times = [t for t, _ in summary.miss_times]
+    assert {"working", "not running"} <= {cause for _, cause in summary.miss_times}
+    assert times == sorted(times) and 0.0 < times[0] < summary.elapsed

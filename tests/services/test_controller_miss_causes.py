@@ -32,3 +32,18 @@ def test_ticks_on_time_are_not_counted_and_the_summary_line_names_every_cause():
     line = Summary(misses_woke_late=5, misses_not_run=6, misses_working=7, working_cpu_p50_ms=1.5).line()
     assert "5 woke late, 6 overran while not running, 7 overran while working (thread CPU p50 1.500 ms" in line
     assert causes.working_work_p50() == (0.0, 0.0)
+
+
+def test_the_first_misses_are_kept_with_their_time_and_cause_and_only_the_first():
+    causes = MissCauses()
+    causes.note(1, reached_clock_in_time=False, period_cpu=0.004, median_cpu=MEDIAN, at=0.3125)
+    causes.note(2, reached_clock_in_time=True, period_cpu=MEDIAN, median_cpu=MEDIAN, at=4.5)
+    causes.note(1, reached_clock_in_time=False, period_cpu=MEDIAN, median_cpu=MEDIAN, at=7.25)
+    causes.note(0, reached_clock_in_time=False, period_cpu=1.0, median_cpu=MEDIAN, at=8.0)     # on time: not kept
+    assert causes.times == [(0.3125, "working"), (4.5, "woke late"), (7.25, "not running")]
+    for k in range(2 * MissCauses.KEEP):
+        causes.note(1, reached_clock_in_time=True, period_cpu=MEDIAN, median_cpu=MEDIAN, at=10.0 + k)
+    assert len(causes.times) == MissCauses.KEEP and causes.times[-1] == (10.0 + MissCauses.KEEP - 4, "woke late")
+    line = Summary(miss_times=tuple(causes.times[:2])).line()
+    assert line.endswith("; first misses at: 0.312 s (working), 4.500 s (woke late)")
+    assert Summary().line().endswith("; first misses at: none")
