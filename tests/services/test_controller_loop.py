@@ -381,3 +381,30 @@ def test_the_loop_puts_a_busy_overrun_down_to_work_and_a_sleeping_one_to_not_run
     times = [t for t, _ in summary.miss_times]
     assert {"working", "not running"} <= {cause for _, cause in summary.miss_times}
     assert times == sorted(times) and 0.0 < times[0] < summary.elapsed
+
+
+def test_the_frames_queued_before_the_clock_and_the_first_heartbeat_are_not_the_first_periods_work(daemon):
+    """The frames that queued up while the daemon started, and the first put on the heartbeat publisher, are
+    handled before the clock starts (`deadline` is None until the first tick) — not in the first period."""
+    class Stop:
+        stopped = False
+
+    queued = [message(cs.Heartbeat(n % 3, ODriveError.NONE, AxisState.IDLE)) for n in range(40)]
+    read_at, put_at = [], []      # the tick's deadline when each queued frame was read / each heartbeat put
+
+    def recv(timeout=None):
+        if not queued:
+            return None
+        read_at.append(daemon.deadline)
+        return queued.pop(0)
+
+    alive = daemon.alive_pub
+    put = alive.put
+    alive.put = lambda payload: (put_at.append(daemon.deadline), put(payload))
+    daemon.master.bus.recv = recv
+    daemon.master.clock = time.monotonic
+    daemon.config.duration = 0.03
+    summary = daemon.run(Stop())
+    assert summary.ticks > 0 and daemon.master.rx_frames == 40
+    assert read_at == [None] * 40
+    assert put_at == [None]                           # one heartbeat a second: the first went out before the clock
