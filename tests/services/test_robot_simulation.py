@@ -105,3 +105,9 @@ def test_a_cyclic_schedule_fires_once_per_period_and_never_in_a_burst_after_a_st
     # a 55 ms stall: one message when the loop runs again, then the period from there — no catch-up burst
     after = [t for t in (1.055 + k / 1000.0 for k in range(30)) if schedule.due(t)]
     assert [round(t, 9) for t in after] == [1.055, 1.065, 1.075]
+    # a send reached 8 ms late keeps the grid: the next interval is 2 ms, and k sends after one are always more
+    # than k − 1 periods later (the guarantee the process test checks on the real clock)
+    late = Schedule(100.0)
+    fired = [t for t in (0.0, 0.001, 0.018, 0.019, 0.0195, 0.020, 0.021, 0.030, 0.031) if late.due(t)]
+    assert fired == [0.0, 0.018, 0.020, 0.030]
+    assert all(fired[j] - fired[i] > (j - i - 1) * 0.01 for i in range(len(fired)) for j in range(i + 1, len(fired)))
