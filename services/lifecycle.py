@@ -28,12 +28,14 @@ class StopFlag:
         return self._event.wait(seconds)
 
 
-def hold_until(t: float, spin: float) -> None:
-    """Return at monotonic time `t` (at once if it has passed): sleep until `spin` before it, then
-    poll the clock (a sleeping thread wakes tens of microseconds late; see RateClock)."""
-    delay = t - time.monotonic() - spin
-    if delay > 0:
-        time.sleep(delay)
+def poll_until(t: float) -> None:
+    """Return at monotonic time `t` (at once if it has passed), polling the clock all the way: never
+    sleeping. A thread that sleeps gives up its CPU, and on a virtual machine an idle vCPU is
+    descheduled: on an overloaded host it can wake milliseconds late. For a hold between
+    computing an actuator command and sending it, that lateness would be actuation delay; polled,
+    the hold ends at `t` unless the host takes the CPU away from a running thread, which delays a
+    send made at once just as much. Costs the CPU time of the hold (meant for a thread alone on its
+    CPU: the controller's loop, `--cpu`)."""
     while time.monotonic() < t:
         pass
 

@@ -42,7 +42,7 @@ from sharedctl.protocol.canframe import DEFAULT_WHEEL_NODES, arbitration_id
 from sharedctl.protocol.odrive_enums import CommandId
 
 from ..controller.priority import make_loop_realtime, pin_to_cpu
-from ..lifecycle import RateClock, hold_until
+from ..lifecycle import RateClock, poll_until
 from .statistics import percentiles
 
 RECEIVE_MARGIN = 2e-4     # s, as the daemon's (services/controller/daemon.py)
@@ -151,8 +151,9 @@ def _loop(rate_hz: float, seconds: float, work_us: float, spin: float, pre_send_
     try:
         io_drain, io_send, io_read = _io_cost(io, period, spin) if io is not None else (0.0, 0.0, 0.0)
         pre = _calibrate(pre_us - io_drain)
-        # the hold polls the clock for its last `spin` (thread CPU, as the daemon's does): not calibrated work
-        post = _calibrate(work_us - pre_us - io_send - io_read - (spin * 1e6 if hold_us > 0 else 0.0))
+        # the hold polls the clock from the end of the work before it to `hold_us` after the deadline (thread
+        # CPU, as the daemon's does, ≈ hold_us − pre_us at the median): not calibrated work
+        post = _calibrate(work_us - pre_us - io_send - io_read - max(hold_us - pre_us, 0.0))
         ticks = int(seconds * rate_hz)
         lateness, wall, cpu_ns = np.empty(ticks), np.empty(ticks), np.empty(ticks)
         sent, pre_wall = np.empty(ticks), np.empty(ticks)
@@ -169,7 +170,7 @@ def _loop(rate_hz: float, seconds: float, work_us: float, spin: float, pre_send_
                 io.drain()
             _work(pre)
             if hold_us > 0:
-                hold_until(deadline + hold_us * 1e-6, spin)
+                poll_until(deadline + hold_us * 1e-6)
             if io is not None:
                 io.send()
             sent[k] = time.perf_counter_ns()

@@ -67,7 +67,8 @@ def add_parser(subparsers) -> None:
     p.add_argument("--torque-at-us", type=float, default=0.0,
                    help="send each tick's torque frames this long after its deadline, or at once if the tick is still "
                         "computing then (time-triggered output: the same actuation delay every period; 0, the "
-                        "default: as soon as computed — the hold sleeps, and an overloaded host can oversleep it)")
+                        "default: as soon as computed — delay costs the shared controller margin on a loaded host; "
+                        "the hold polls the clock, never sleeps)")
     p.add_argument("--cpu", type=int, metavar="N",
                    help="run the loop thread on CPU N alone and keep the process's other threads (Zenoh, CAN) off it "
                         "(default: no pinning; docs/performance.md)")

@@ -15,8 +15,8 @@ wheel estimates arrive (phase.py, on by default); the last `spin` before it is p
 slept (`RateClock`); a tick whose estimates are late waits for them, briefly (`sensor_wait`);
 operator commands wait in a Zenoh channel that the loop polls (command_intake.py: no Python
 callback thread, so none can hold the GIL when the loop wakes); with `torque_at` a tick's torque
-frames are held until that long after its deadline (time-triggered output; off by default: the
-hold sleeps between the computation and the send, docs/performance.md); a warm-up step runs and
+frames are held until that long after its deadline (time-triggered output: the hold polls the clock,
+never sleeps; off by default, docs/performance.md); a warm-up step runs and
 `gc.freeze()` is called, the first Heartbeat sent and the CAN frames queued since the bus opened are
 read before the clock starts (they cost the first period 0.8–0.9 ms otherwise). RobotState goes out at the telemetry
 rate, events when something changes (rate-limited), a Heartbeat message at 1 Hz and a
@@ -52,7 +52,7 @@ from sharedctl.protocol.msgpack_codec import encode_message
 from sharedctl.protocol.wire_types import Dims
 from sharedctl.shared_controller import NonFiniteCommand, SharedController
 
-from ..lifecycle import RateClock, hold_until
+from ..lifecycle import RateClock, poll_until
 from . import command_intake, lease_queries
 from .can_master import CanMaster
 from .command_intake import CommandIntake
@@ -415,7 +415,7 @@ class ControllerDaemon:
         self.out, self.u_s, self.tau = out, out.u_s, np.array(tau)
         self.torque_ready.add(time.monotonic() - now)
         if self.config.torque_at > 0.0:
-            hold_until((now if self.deadline is None else self.deadline) + self.config.torque_at, self.config.spin)
+            poll_until((now if self.deadline is None else self.deadline) + self.config.torque_at)
         self.master.send_torques(tau)
         sent = time.monotonic()
         self.torque_out.add(sent - now)

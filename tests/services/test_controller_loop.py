@@ -327,7 +327,7 @@ def test_a_tick_reports_when_its_torques_were_ready_apart_from_when_they_left(da
     from sharedctl.services.controller import daemon as daemon_module
 
     at_hold = []
-    monkeypatch.setattr(daemon_module, "hold_until", lambda t, spin: at_hold.append(
+    monkeypatch.setattr(daemon_module, "poll_until", lambda t: at_hold.append(
         (daemon.torque_ready.n, daemon.torque_out.n, t, len(daemon.master.bus.take()))))
     arm(daemon)
     daemon.config.torque_at = 0.02

@@ -59,12 +59,12 @@ def test_a_negative_spin_is_refused():
         RateClock(0.002, spin=-1e-4)
 
 
-def test_hold_until_sleeps_to_spin_before_the_instant_then_polls_to_it(fake):
-    lifecycle.hold_until(100.010, spin=1e-4)
-    assert fake.slept == [pytest.approx(0.0099, abs=2e-6)]
+def test_poll_until_polls_to_the_instant_and_never_sleeps(fake):
+    lifecycle.poll_until(100.010)
+    assert fake.slept == []
     assert 100.010 <= fake.now < 100.010 + 2e-6
 
 
-def test_hold_until_an_instant_that_has_passed_returns_at_once(fake):
-    lifecycle.hold_until(99.0, spin=1e-4)
-    assert fake.slept == [] and fake.polls == 2
+def test_poll_until_an_instant_that_has_passed_returns_at_once(fake):
+    lifecycle.poll_until(99.0)
+    assert fake.slept == [] and fake.polls == 1
