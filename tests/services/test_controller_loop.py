@@ -221,6 +221,47 @@ def test_robot_state_is_published_with_the_link_health(daemon):
     assert math.isclose(state.k_s, 1.0) and not state.estop_active
 
 
+def test_robot_state_in_three_stages_sends_what_was_captured_in_its_first(daemon):
+    """telemetry_stage 0 captures (and works out q_r), 1 builds, 2 puts: one message, with the values of the
+    period that captured it, whatever the ticks between the stages change; the same as publish_state's."""
+    states = daemon.session.publishers["sharedctl/v1/unit/state"].payloads
+    arm(daemon)
+    operator(daemon, 1, 10.003, joystick=(0.0, 0.25, 0.0))
+    feed(daemon, 10.004, heartbeat=False)
+    daemon.tick(10.005)
+    daemon.publish_state(10.005)
+    at_once = decode_message(states[-1], expect=RobotState)
+    daemon.telemetry_stage(0, 10.005)
+    operator(daemon, 2, 10.006, joystick=(0.5, 0.0, 0.0))         # the next period: another command, another u_h
+    feed(daemon, 10.006, heartbeat=False)
+    daemon.tick(10.007)
+    daemon.telemetry_stage(1, 10.007)
+    sent = len(states)
+    daemon.telemetry_stage(2, 10.009)
+    assert len(states) == sent + 1
+    staged = decode_message(states[-1], expect=RobotState)
+    assert staged.seq == at_once.seq + 1 and staged.u_h == pytest.approx((0.0, 5.0, 0.0))
+    assert staged.q_ref == pytest.approx(at_once.q_ref, nan_ok=True)
+    assert staged.wheel_torques == pytest.approx(at_once.wheel_torques) and daemon.u_s.tolist() != list(staged.u_s)
+    daemon.telemetry_stage(2, 10.011)                                # nothing built since: nothing sent
+    assert len(states) == sent + 1
+
+
+def test_a_robot_state_stage_that_fails_is_reported_and_its_message_dropped(daemon, monkeypatch):
+    from sharedctl.services.controller import daemon as daemon_module
+
+    states = daemon.session.publishers["sharedctl/v1/unit/state"].payloads
+    arm(daemon)
+
+    def broken(*args):
+        raise ValueError("no state")
+
+    monkeypatch.setattr(daemon_module, "robot_state", broken)
+    for stage in range(3):
+        daemon.telemetry_stage(stage, 10.003 + 0.002 * stage)
+    assert states == [] and any("RobotState not sent: ValueError: no state" in e.text for e in events(daemon))
+
+
 class TimedBus(MemoryBus):
     """recv() hands out queued (arrival time, message) pairs on the daemon's fake clock: waiting for one
     moves the clock to its arrival; a timeout with nothing due moves it by the timeout."""
