@@ -18,7 +18,7 @@ callback thread, so none can hold the GIL when the loop wakes); with `torque_at`
 frames are held until that long after its deadline (time-triggered output: the hold polls the clock,
 never sleeps; off by default, docs/performance.md); a warm-up step runs and
 `gc.freeze()` is called, the first Heartbeat sent and the CAN frames queued since the bus opened are
-read before the clock starts (they cost the first period 0.8–0.9 ms otherwise). RobotState goes out at the telemetry
+read before the clock starts (they cost the first period 0.3–0.7 ms otherwise). RobotState goes out at the telemetry
 rate (captured, built and sent in three consecutive periods: `telemetry_stage`), events when
 something changes (rate-limited), a Heartbeat message at 1 Hz and a
 liveliness token for as long as the daemon runs.
