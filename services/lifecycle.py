@@ -40,6 +40,24 @@ def poll_until(t: float) -> None:
         pass
 
 
+class Schedule:
+    """A cyclic send time on any clock: `due(now)` is True once per period, never in bursts after a stall
+    (a send reached late keeps the next on the period's grid; after a stall of a period or more, the next
+    is a period after now). The robot's cyclic frames and truth messages, the controller's telemetry."""
+
+    def __init__(self, rate_hz: float, start: float = 0.0) -> None:
+        self.period = 1.0 / rate_hz
+        self.next = start
+
+    def due(self, now: float) -> bool:
+        if now + 1e-9 < self.next:
+            return False
+        self.next += self.period
+        if self.next <= now:
+            self.next = now + self.period
+        return True
+
+
 class RateClock:
     """Absolute-deadline periodic clock (no drift): `wait()` sleeps until the next tick.
 

@@ -19,7 +19,7 @@ frames are held until that long after its deadline (time-triggered output: the h
 never sleeps; off by default, docs/performance.md); a warm-up step runs and
 `gc.freeze()` is called, the first Heartbeat sent and the CAN frames queued since the bus opened are
 read before the clock starts (they cost the first period 0.3–0.7 ms otherwise). RobotState goes out at the telemetry
-rate (captured, built and sent in three consecutive periods: `telemetry_stage`), events when
+rate on the clock (captured, built and sent in three consecutive periods: `telemetry`), events when
 something changes (rate-limited), a Heartbeat message at 1 Hz and a
 liveliness token for as long as the daemon runs.
 
@@ -53,7 +53,7 @@ from sharedctl.protocol.msgpack_codec import encode_message
 from sharedctl.protocol.wire_types import Dims
 from sharedctl.shared_controller import NonFiniteCommand, SharedController
 
-from ..lifecycle import RateClock, poll_until
+from ..lifecycle import RateClock, Schedule, poll_until
 from . import command_intake, lease_queries
 from .can_master import CanMaster
 from .command_intake import CommandIntake
@@ -140,6 +140,9 @@ class ControllerDaemon:
         self.state_seq = 0
         self._state_capture: tuple | None = None     # a RobotState between its stages (telemetry_stage)
         self._state_message = None
+        self._state_stage: int | None = None        # the stage the next period runs, None: none under way
+        self.state_schedule = Schedule(config.telemetry_rate)   # on the loop's clock (`telemetry`)
+        self.heartbeat_schedule = Schedule(1.0)
         self.heartbeat_seq = 0
         self.started_at = time.monotonic()
         self.last_authority = None
@@ -220,11 +223,9 @@ class ControllerDaemon:
         self.warm_up()
         gc.collect()
         gc.freeze()      # start-up objects (scenario, Zenoh, numpy) out of the collector's way: shorter pauses
-        self.publish_heartbeat()          # the first (the publisher's first put is the slow one), before the clock
+        self.heartbeats(time.monotonic())  # the first (the publisher's first put is the slow one), before the clock
         self.master.receive_until(0.0)    # the frames queued since the bus opened: not the first period's work
         clock = RateClock(self.period, spin=config.spin)
-        telemetry_every = max(1, round(config.rate / config.telemetry_rate))
-        heartbeat_every = max(1, round(config.rate))
         cpu0, t0 = time.process_time(), time.monotonic()
         self.master.request_arming()
         ticks = 0
@@ -250,13 +251,8 @@ class ControllerDaemon:
                 if config.duration is not None and now - t0 >= config.duration:
                     break
                 self.tick(now)
-                if telemetry_every >= TELEMETRY_STAGES:     # a RobotState's stages in consecutive periods
-                    if ticks % telemetry_every < TELEMETRY_STAGES:
-                        self.telemetry_stage(ticks % telemetry_every, now)
-                elif ticks % telemetry_every == 0:
-                    self.publish_state(now)
-                if ticks % heartbeat_every == heartbeat_every - 1:      # (the first went out before the clock)
-                    self.publish_heartbeat()
+                self.telemetry(now)
+                self.heartbeats(now)
                 ticks += 1
                 self.compute.add(time.monotonic() - now)
                 if self.phase_lock is not None and (arrival := estimates_arrival(self.master.estimates())) is not None:
@@ -448,13 +444,34 @@ class ControllerDaemon:
         self.emit(now, f"estop:{reason[:12]}", "estop", "critical", f"ESTOP: {reason}")
 
     # -------------------------------------------------------------- telemetry
+    def telemetry(self, now: float) -> None:
+        """Once a period, after the send: RobotState at `telemetry_rate` on the clock, not every so many
+        ticks, so a loop that misses deadlines still reports at its rate. When one is due its three
+        stages (`telemetry_stage`) run in this period and the next two; at a telemetry rate above a
+        third of the loop's, each goes out whole in the period it is due."""
+        if self._state_stage is None:
+            if not self.state_schedule.due(now):
+                return
+            if TELEMETRY_STAGES * self.period > self.state_schedule.period:
+                self.publish_state(now)
+                return
+            self._state_stage = 0
+        stage = self._state_stage
+        self._state_stage = stage + 1 if stage + 1 < TELEMETRY_STAGES else None
+        self.telemetry_stage(stage, now)
+
+    def heartbeats(self, now: float) -> None:
+        """A Heartbeat message once a second on the clock (the first one before the loop's clock starts)."""
+        if self.heartbeat_schedule.due(now):
+            self.publish_heartbeat()
+
     def publish_state(self, now: float) -> None:
         """One RobotState of this period, captured, built, encoded and put at once."""
         for stage in range(TELEMETRY_STAGES):
             self.telemetry_stage(stage, now)
 
     def telemetry_stage(self, stage: int, now: float) -> None:
-        """One of a RobotState's three stages, each in its own period (`run`): 0 captures this period's
+        """One of a RobotState's three stages, each in its own period (`telemetry`): 0 captures this period's
         values and works out the reference q_r (on demand, `StepOutput.q_r`), 1 builds the message, 2
         encodes and puts it. At once they took 0.5–0.65 ms of the loop thread in one period, against
         ≈ 0.6 ms for a whole ordinary period; spread, no period carries much more than another. The

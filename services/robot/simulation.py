@@ -12,6 +12,7 @@ from sharedctl.models import OmniRobot
 from sharedctl.protocol import cansimple as cs
 from sharedctl.protocol.canframe import DEFAULT_WHEEL_NODES, MAX_CMD_ID
 
+from ..lifecycle import Schedule
 from .axis import Axis, AxisConfig
 from .plant import Plant, PlantState, RobotSimConfig
 
@@ -25,22 +26,6 @@ ODRIVE_SENT_COMMANDS = frozenset(int(spec.cmd) for spec in cs.FRAME_SPECS.values
 def is_own_direction(arbitration_id: int, is_remote: bool) -> bool:
     """True for a frame of the drive → host direction (what this robot itself sends)."""
     return not is_remote and (arbitration_id & MAX_CMD_ID) in ODRIVE_SENT_COMMANDS
-
-
-class Schedule:
-    """A cyclic send time: `due(now)` is True once per period, never in bursts after a stall."""
-
-    def __init__(self, rate_hz: float, start: float = 0.0) -> None:
-        self.period = 1.0 / rate_hz
-        self.next = start
-
-    def due(self, now: float) -> bool:
-        if now + 1e-9 < self.next:
-            return False
-        self.next += self.period
-        if self.next <= now:
-            self.next = now + self.period
-        return True
 
 
 class RobotSimulation:

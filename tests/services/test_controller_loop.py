@@ -247,6 +247,23 @@ def test_robot_state_in_three_stages_sends_what_was_captured_in_its_first(daemon
     assert len(states) == sent + 1
 
 
+def test_robot_state_and_heartbeats_go_out_at_their_rates_on_the_clock_whatever_the_loop_rate(daemon):
+    """`telemetry` and `heartbeats`, once a period: 50 RobotStates and one Heartbeat a second whether the loop
+    ticks at 500 Hz or, missing every other deadline, at 250 Hz (a count of ticks would halve both); every
+    RobotState whole and in sequence."""
+    states = daemon.session.publishers["sharedctl/v1/unit/state"].payloads
+    beats = daemon.session.publishers["sharedctl/v1/unit/alive/controller"].payloads
+    arm(daemon)
+    for start, period in ((20.0, 0.002), (30.0, 0.004)):
+        sent, beat = len(states), len(beats)
+        for k in range(round(3.0 / period)):
+            daemon.telemetry(start + k * period)
+            daemon.heartbeats(start + k * period)
+        assert len(states) - sent in (149, 150, 151) and len(beats) - beat == 3
+    seqs = [decode_message(p, expect=RobotState).seq for p in states]
+    assert seqs == list(range(1, len(seqs) + 1))
+
+
 def test_a_robot_state_stage_that_fails_is_reported_and_its_message_dropped(daemon, monkeypatch):
     from sharedctl.services.controller import daemon as daemon_module
 

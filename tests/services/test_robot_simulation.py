@@ -96,7 +96,7 @@ def test_frames_for_other_nodes_are_ignored():
 
 def test_a_cyclic_schedule_fires_once_per_period_and_never_in_a_burst_after_a_stall():
     """The rate of the truth messages (and of heartbeats and encoder estimates), on a synthetic clock."""
-    from sharedctl.services.robot.simulation import Schedule
+    from sharedctl.services.lifecycle import Schedule
 
     schedule = Schedule(100.0)
     fired = [k / 1000.0 for k in range(1000) if schedule.due(k / 1000.0)]     # 1 s polled at 1 kHz
