@@ -14,6 +14,16 @@ from sharedctl.services.bench.stack_run import Frame, analyse, analyse_turns
 from sharedctl.services.bench.statistics import group_bursts, missed_periods, percentiles, period_jitter
 
 
+class LoggedChild:
+    """A started process as `_daemon_summary` reads it: the tail of its log."""
+
+    def __init__(self, text):
+        self.text = text
+
+    def tail(self, lines):
+        return self.text + "\n"
+
+
 def test_worst_case_frame_lengths_with_bit_stuffing():
     assert frame_bits(8) == 135        # 34 + 64 + 13 + ⌊97/4⌋
     assert frame_bits(4) == 95
@@ -135,11 +145,7 @@ def test_the_causes_of_missed_deadlines_are_read_from_the_summary_line():
                    misses_working=1, working_cpu_p50_ms=2.25, working_frames_p50=7.0, working_commands_p50=1.5,
                    frames_rx=63000).line()
 
-    class Child:
-        def tail(self, lines):
-            return "other output\n" + line + "\n"
-
-    got = _daemon_summary(Child())
+    got = _daemon_summary(LoggedChild("other output\n" + line))
     assert (got["missed"], got["late"], got["misses_woke_late"], got["misses_not_run"], got["misses_working"]) == (
         3, 4, 2, 4, 1)
     assert got["misses_working_cpu_p50_us"] == 2250.0
@@ -152,17 +158,10 @@ def test_the_first_misses_times_are_read_from_the_summary_line_and_merged_over_c
     from sharedctl.services.bench.stack_run import _daemon_summary, merge_summaries
     from sharedctl.services.controller.loop_summary import Summary
 
-    class Child:
-        def __init__(self, line):
-            self.line = line
-
-        def tail(self, lines):
-            return self.line + "\n"
-
     line = Summary(ticks=10, missed=1, late=1, miss_times=((0.3125, "working"), (12.0, "not running"))).line()
-    got = _daemon_summary(Child(line))
+    got = _daemon_summary(LoggedChild(line))
     assert got["miss_times"] == [[0.312, "working"], [12.0, "not running"]]
-    assert _daemon_summary(Child(line.split("; first misses")[0]))["miss_times"] is None    # an older line
+    assert _daemon_summary(LoggedChild(line.split("; first misses")[0]))["miss_times"] is None    # an older line
     merged = merge_summaries([got, dict(got, miss_times=[[1.5, "woke late"]])])
     assert merged["miss_times"] == [[0.312, "working"], [12.0, "not running"], [1.5, "woke late"]]
     assert _miss_times(got["miss_times"]) == "0.31 (working), 12.00 (not running)"
@@ -173,16 +172,9 @@ def test_the_output_instant_and_the_compute_before_it_are_read_from_the_summary_
     from sharedctl.services.bench.stack_run import _daemon_summary
     from sharedctl.services.controller.loop_summary import Summary
 
-    class Child:
-        def __init__(self, line):
-            self.line = line
-
-        def tail(self, lines):
-            return self.line + "\n"
-
     held = Summary(ticks=10, torque_ready_p50_ms=0.21, torque_ready_p99_ms=0.48, torque_at_ms=0.35).line()
     at_once = Summary(ticks=10, torque_ready_p50_ms=0.2).line()
-    got, plain = _daemon_summary(Child(held)), _daemon_summary(Child(at_once))
+    got, plain = _daemon_summary(LoggedChild(held)), _daemon_summary(LoggedChild(at_once))
     assert (got["torque_ready_p50_us"], got["torque_ready_p99_us"], got["torque_at_us"]) == (210.0, 480.0, 350.0)
     assert plain["torque_at_us"] == 0.0 and plain["torque_ready_p50_us"] == 200.0
 
