@@ -13,16 +13,16 @@ import importlib
 import sys
 
 COMMANDS = {
-    "sim": "sharedctl.services.sim_command",
-    "paper": "sharedctl.services.paper_command",
-    "fuzz": "sharedctl.services.fuzz_command",
+    "sim": "sharedctl.services.studies.sim.command",
+    "paper": "sharedctl.services.studies.paper.command",
+    "fuzz": "sharedctl.services.studies.fuzz.command",
     "robot": "sharedctl.services.robot.command",
     "controller": "sharedctl.services.controller.command",
     "console": "sharedctl.services.console.command",
-    "demo": "sharedctl.services.demo_command",
-    "bench": "sharedctl.services.bench.command",
-    "compare": "sharedctl.services.compare_command",
-    "faults": "sharedctl.services.faults.command",
+    "demo": "sharedctl.services.demo.command",
+    "bench": "sharedctl.services.studies.bench.command",
+    "compare": "sharedctl.services.studies.compare.command",
+    "faults": "sharedctl.services.studies.campaign.command",
     "router": "sharedctl.services.security.router_command",
     "credentials": "sharedctl.services.security.credentials_command",
     "fault-relay": "sharedctl.services.faults.zenoh_relay",
@@ -30,7 +30,7 @@ COMMANDS = {
     "record": "sharedctl.services.recording.record_command",
     "record-recover": "sharedctl.services.recording.recover_command",
     "replay": "sharedctl.services.recording.replay_command",
-    "plot": "sharedctl.services.recording.plot_command",
+    "plot": "sharedctl.services.studies.plot.command",
 }
 
 

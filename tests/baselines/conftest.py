@@ -3,7 +3,7 @@ import functools
 
 from sharedctl.baselines.comparison import build_strategy, run
 from sharedctl.baselines.operator_link import IDEAL, IMPAIRED
-from sharedctl.services.compare_scenarios import adversarial_corner
+from sharedctl.services.studies.compare.scenarios import adversarial_corner
 from sharedctl.scenario import parse
 from sharedctl.services.scenario_files import load
 

@@ -18,7 +18,7 @@ from pathlib import Path
 
 import pytest
 
-from sharedctl.services.demo_measure import TOLERANCE
+from sharedctl.services.demo.measure import TOLERANCE
 
 pytestmark = [pytest.mark.slow, pytest.mark.processes]
 RUNS = {"paper_convex": 20.0, "paper_nonconvex": 30.0}

@@ -3,7 +3,7 @@ import numpy as np
 import pytest
 
 from sharedctl.protocol.messages import Authority, LinkHealth, RobotState, SetClass
-from sharedctl.services.demo_measure import Recorder, deviation, measure
+from sharedctl.services.demo.measure import Recorder, deviation, measure
 from sharedctl.services.scenario_files import load
 
 
@@ -66,7 +66,7 @@ def test_deviation_compares_final_pose_and_authority_share():
 
 def test_without_friction_the_robot_plant_reference_is_the_model_plant_reference():
     from sharedctl.scenario import parse
-    from sharedctl.services.demo_measure import plant_reference_run, reference_run
+    from sharedctl.services.demo.measure import plant_reference_run, reference_run
 
     data = dict(load("paper_convex").data, robot_sim={"friction_viscous": 0.0, "friction_coulomb": 0.0})
     scenario = parse(data)

@@ -17,7 +17,7 @@ from mcap.reader import make_reader
 from sharedctl.protocol import cansimple, keys
 from sharedctl.protocol.dbc import DBC_PATH
 from sharedctl.services.recording.mcap_reading import read_all
-from sharedctl.services.recording.plot_command import plot_recording
+from sharedctl.services.studies.plot.command import plot_recording
 from sharedctl.services.recording.replay_command import replay, wire_payload
 from sharedctl.services.zenoh_session import free_loopback_port, open_session
 

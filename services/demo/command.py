@@ -1,0 +1,253 @@
+"""`sharedctl demo [--scenario FILE|name] [--controller ce|nce|of] [--duration S] [--headless] [--json OUT]
+[--zenoh-listen ENDPOINT]` — the whole system on this host, measured on the ground truth.
+
+Starts `sharedctl robot`, `sharedctl controller` and `sharedctl console --script SCENARIO` as
+child processes (headless, or the live dashboard when a terminal is attached), lets the
+scripted operator drive for the scenario's duration, stops them in order (operator,
+controller, robot: SIGTERM, then at most 2 s each; SIGKILL only as a last resort and only to
+its own children; between the operator and the controller it waits, at most 3 s, for the
+robot to come to rest: a controller that exits leaves the wheels unpowered and a moving robot
+would coast on), and prints a summary: violations, min_margin and final_speed from
+GroundTruth; tracking and authority (the names of `sharedctl sim --json`) from RobotState;
+and the in-process sampled simulation of the same scenario (`reference`) with the deviation
+between the two. Exit 0 only if nothing was violated, no emergency stop cut the run short, and
+every child exited cleanly.
+
+Wiring (Zenoh peers do not forward between peers they connect, so the operator console
+connects to the controller, whose telemetry it needs):
+
+    robot       listens  tcp/127.0.0.1:R      (GroundTruth)
+    controller  listens  tcp/127.0.0.1:C      (--zenoh-listen; RobotState, Events, OperatorCommand)
+    console     connects to C
+    demo        connects to R and C
+    CAN         python-can udp_multicast, host-local (hop_limit=0), a free port per run
+
+The run's clock starts with the first RobotState that shows the operator in control (the
+console starts its script on its first RobotState, ~20–40 ms earlier).
+"""
+from __future__ import annotations
+
+import shutil
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+from sharedctl.protocol import keys
+from sharedctl.scenario import ScenarioError
+
+from sharedctl.services.children import Child, free_udp_port, raise_priority, start_child, udp_receive_buffer_errors, wait_listening
+from sharedctl.services.faults.stack import FaultStack, add_arguments as add_fault_arguments
+from sharedctl.services.security.secure_stack import SecureStack, add_arguments as add_secure_arguments
+from sharedctl.services.recording.launch import add_argument as add_record_argument, open_demo_recording
+from .measure import TOLERANCE, Recorder, deviation, measure, plant_reference_run, reference_run
+from sharedctl.services.lifecycle import StopFlag
+from sharedctl.services.scenario_files import load
+from sharedctl.services.summary_output import emit
+from sharedctl.services.zenoh_session import EndpointError, check_loopback, free_loopback_port, open_session
+
+STARTUP_TIMEOUT = 30.0    # s until the operator is in control
+SETTLE_SPEED = 0.02       # m/s: the robot is at rest (the controller is stopped only then)
+SETTLE_TIMEOUT = 3.0      # s the controller gets to bring the robot to rest once the operator has let go
+
+
+def add_parser(subparsers) -> None:
+    p = subparsers.add_parser("demo", help="run robot, controller and scripted operator together and measure the run")
+    p.add_argument("--scenario", default="paper_convex", help="scenario TOML file or packaged name (default paper_convex)")
+    p.add_argument("--controller", choices=("ce", "nce", "of"), help="machine law (default: the scenario's, else ce)")
+    p.add_argument("--duration", type=float, metavar="S", help="run length (default: the scenario's duration)")
+    p.add_argument("--headless", action="store_true", help="no live dashboard even with a terminal")
+    p.add_argument("--json", metavar="OUT", help="write the summary as JSON to OUT ('-' for stdout)")
+    p.add_argument("--zenoh-listen", metavar="ENDPOINT",
+                   help="the controller's endpoint, with --secure the router's (default: a free loopback port)")
+    p.add_argument("--robot-id", default="robot1", help="robot id in the key expressions (default robot1)")
+    p.add_argument("--feedback-timeout-ms", type=float, metavar="MS",
+                   help="passed to the controller: CAN feedback age that triggers Estop (default: the controller's, 50)")
+    p.add_argument("--no-reference", action="store_true", help="skip the in-process sampled reference run")
+    p.add_argument("--log-dir", metavar="DIR", help="keep the children's output here (default: a temporary directory, removed on success)")
+    add_fault_arguments(p)
+    add_record_argument(p)
+    add_secure_arguments(p)
+    p.set_defaults(handler=run)
+
+
+
+# ----- the command -------------------------------------------------------------
+def run(args) -> int:
+    stop = StopFlag().install()
+    try:
+        scenario = load(args.scenario)
+        loop, _, _ = scenario.closed_loop(args.controller)
+        secure = SecureStack.from_args(args, free_loopback_port)   # --secure: see services/security/secure_stack.py
+        controller_ep = (check_loopback(args.zenoh_listen) if args.zenoh_listen and not secure.enabled
+                         else f"tcp/127.0.0.1:{free_loopback_port()}")
+        keys.check_robot_id(args.robot_id)
+        faults = FaultStack.from_args(args)   # --fault SPEC: see services/faults/stack.py
+    except (ScenarioError, EndpointError, ValueError) as exc:
+        print(f"sharedctl demo: {exc}", file=sys.stderr)
+        return 2
+    duration = args.duration or scenario.duration
+    if duration <= 0:
+        print("sharedctl demo: --duration must be positive", file=sys.stderr)
+        return 2
+    robot_ep = f"tcp/127.0.0.1:{free_loopback_port()}"
+    can = ["--can-interface", "udp_multicast", "--can-option", f"port={free_udp_port()}"]
+    can_controller, can_robot = faults.can_arguments(can, free_udp_port)
+    console_ep = faults.console_endpoint(controller_ep, free_loopback_port)
+    interactive = not args.headless and sys.stdin.isatty() and sys.stdout.isatty()
+    scenario_arg = str(Path(args.scenario).resolve()) if Path(args.scenario).exists() else args.scenario
+    backstop = str(duration + STARTUP_TIMEOUT + 30.0)    # children stop by themselves should this demo die
+    law = ["--controller", args.controller] if args.controller else []
+    if args.feedback_timeout_ms is not None:
+        law += ["--feedback-timeout-ms", str(args.feedback_timeout_ms)]
+    log_dir = Path(args.log_dir) if args.log_dir else Path(tempfile.mkdtemp(prefix="sharedctl-demo-"))
+    log_dir.mkdir(parents=True, exist_ok=True)
+    common = ["--robot-id", args.robot_id]
+
+    rec = Recorder(loop.feasible)
+    udp_errors_before = udp_receive_buffer_errors()
+    children: dict[str, Child] = {}
+    session = recording = recording_summary = None
+    failure = None
+    robot_priority = None
+    start = time.monotonic()
+    try:
+        recording = open_demo_recording(args.record, args.robot_id, scenario_arg, scenario.name, can_controller,
+                                        seed=None if faults.empty else faults.plan.seed)   # docs/recording.md
+        faults.start(controller_ep, args.robot_id, log_dir, backstop, start_child, wait_listening)
+        secure.start(log_dir, backstop, wait_listening)
+        children["robot"] = start_child("robot", ["robot", "--scenario", scenario_arg,
+                                                  *secure.zenoh_args("robot", ["--zenoh-listen", robot_ep]), *can_robot,
+                                                  *common, "--duration", backstop], log_dir)
+        robot_priority = raise_priority(children["robot"].popen.pid)
+        if not secure.wait_up("robot", args.robot_id, children["robot"], STARTUP_TIMEOUT,
+                              lambda: wait_listening(robot_ep, children["robot"], STARTUP_TIMEOUT)):
+            raise RuntimeError(f"robot did not come up on {robot_ep}")
+        # the console before the controller: its start-up (imports, a CPU burst) is over before the
+        # controller runs its feedback timeout; it connects when the controller listens (Zenoh retries)
+        console_argv = ["console", "--script", scenario_arg, *secure.zenoh_args("operator", ["--zenoh-connect", console_ep]),
+                        *common]
+        console_argv += ["--zenoh-connect", recording.endpoint] if recording is not None and not secure.enabled else []
+        children["console"] = start_child("console", console_argv + ([] if interactive else ["--headless"]), log_dir,
+                                          interactive=interactive)
+        controller_argv = ["controller", "--scenario", scenario_arg, *law,
+                           *secure.zenoh_args("controller", ["--zenoh-listen", controller_ep]),
+                           *can_controller, *common, "--duration", backstop]
+        children["controller"] = start_child("controller", controller_argv, log_dir)
+        if not secure.wait_up("controller", args.robot_id, children["controller"], STARTUP_TIMEOUT,
+                              lambda: wait_listening(controller_ep, children["controller"], STARTUP_TIMEOUT)):
+            raise RuntimeError(f"controller did not come up on {controller_ep}")
+        session = secure.open_session(lambda: open_session(connect=[robot_ep, controller_ep]))
+        if recording is not None:
+            recording.attach(session)
+        subscribers = [session.declare_subscriber(keys.truth_key(args.robot_id), rec.on_truth),
+                session.declare_subscriber(keys.state_key(args.robot_id), rec.on_state),
+                session.declare_subscriber(keys.events_key(args.robot_id), rec.on_event)]
+        deadline = time.monotonic() + STARTUP_TIMEOUT
+        while subscribers and not rec.in_control.wait(0.1):
+            dead = [c.name for c in children.values() if c.popen.poll() is not None]
+            if dead or stop.stopped or time.monotonic() > deadline:
+                raise RuntimeError(f"{', '.join(dead)} exited early" if dead else "interrupted" if stop.stopped
+                                   else "the operator never got control (no RobotState with a lease holder)")
+        t0 = rec.operator_start
+        faults.arm(t0)
+        while not stop.stopped and time.monotonic() < t0 + duration:
+            failure = faults.tick(time.monotonic(), children,
+                                  lambda: start_child("controller.restart", controller_argv, log_dir))
+            dead = [c.name for n, c in children.items() if c.popen.poll() is not None and not faults.expected_dead(n)]
+            if dead or failure:
+                failure = failure or f"{', '.join(dead)} exited during the run"
+                break
+            stop.wait(0.05)
+    except RuntimeError as exc:
+        failure = str(exc)
+    finally:
+        settle = None
+        faults.continue_all()
+        if "console" in children:
+            children["console"].stop()
+            controller = children.get("controller")
+            if controller is not None and controller.popen.poll() is None:
+                settle = rec.wait_at_rest(SETTLE_SPEED, SETTLE_TIMEOUT)
+        for name in ("controller", "robot"):
+            if name in children:
+                children[name].stop()
+        faults.stop()
+        time.sleep(0.1)    # the last ground truth samples
+        recording_summary = recording.close() if recording is not None else None
+        if session is not None:
+            session.close()
+        secure.stop()
+    result = measure(rec, rec.operator_start, duration)
+    udp_errors_after = udp_receive_buffer_errors()
+    result["host_udp_receive_buffer_errors"] = (None if udp_errors_before is None or udp_errors_after is None
+                                                else udp_errors_after - udp_errors_before)
+    summary = {"scenario": scenario.name, "controller": loop.controller.name, "requested_duration": duration, **result,
+               "interrupted": stop.stopped, "failure": failure, "settle_seconds": settle,
+               "robot_priority": robot_priority,
+               "processes": {name: children[name].report() for name in ("console", "controller", "robot") if name in children},
+               "endpoints": {"robot": robot_ep, "controller": controller_ep, "can": " ".join(can[1:])},
+               "wall_seconds": time.monotonic() - start, **secure.summary(rec)}
+    if recording is not None:
+        summary["recording"] = recording_summary
+    if not args.no_reference and failure is None:
+        summary["reference"] = reference_run(scenario, args.controller, duration)
+        summary["deviation"] = deviation(result, summary["reference"])
+        summary["reference_plant"] = plant_reference_run(scenario, args.controller, duration)
+        summary["deviation_plant"] = deviation(result, summary["reference_plant"])
+        summary["tolerance"] = TOLERANCE
+    clean = all(c.clean for c in children.values()) and len(children) == 3 and secure.clean
+    summary["ok"] = bool(failure is None and clean and result["violations"] == 0 and result["truth_samples"] > 0
+                         and result["estops"] == 0)   # an estop means the scenario did not run
+    if not faults.empty:   # intended faults: judged as services/faults/stack.py says
+        summary.update(faults=faults.plan.specs, injected=faults.report())
+        summary["ok"] = faults.judge(summary, children, result, failure)
+    _report(summary, args, children, log_dir)
+    return 0 if summary["ok"] else 1
+
+
+def _report(summary: dict, args, children: dict, log_dir: Path) -> None:
+    emit(summary, args.json, _print_table)
+    if not summary["ok"]:
+        for child in children.values():
+            if not child.clean and child.tail():
+                print(f"--- {child.name} (exit {child.exit_code}) ---\n{child.tail()}", file=sys.stderr)
+        reasons = [r for r in (summary["failure"],
+                               f"{summary['violations']} violations" if summary["violations"] else None,
+                               f"{summary['estops']} emergency stops" if summary["estops"] else None,
+                               "a child did not exit cleanly" if not all(
+                                   p["exit_code"] == 0 and not p["killed"] for p in summary["processes"].values()) else None)
+                   if r]
+        print(f"sharedctl demo: FAILED ({'; '.join(reasons) or 'see the table'}); logs in {log_dir}", file=sys.stderr)
+    elif not args.log_dir:
+        shutil.rmtree(log_dir, ignore_errors=True)
+
+
+def _print_table(summary: dict) -> None:
+    from rich.console import Console
+    from rich.table import Table
+
+    plant, ref = summary.get("reference_plant", {}), summary.get("reference", {})
+    table = Table(title=f"sharedctl demo: {summary['scenario']} ({summary['controller']})")
+    table.add_column("measure", no_wrap=True)
+    table.add_column("distributed", justify="right")
+    table.add_column("sampled, robot plant", justify="right")
+    table.add_column("sampled, model plant", justify="right")
+    fmt = lambda v: ("[" + ", ".join(f"{x:.3f}" for x in v) + "]") if isinstance(v, list) else (
+        f"{v:.4g}" if isinstance(v, float) else str(v))
+    for key in ("violations", "min_margin", "final_speed", "final_pose", "tracking_rmse", "final_error",
+                "human_authority", "switches", "theta_hat", "steps", "duration"):
+        table.add_row(key, fmt(summary.get(key)), fmt(plant[key]) if key in plant else "",
+                      fmt(ref[key]) if key in ref else "")
+    dev_plant, dev = summary.get("deviation_plant", {}), summary.get("deviation", {})
+    for key in dev_plant:
+        table.add_row(f"Δ {key}", "", fmt(dev_plant[key]), fmt(dev.get(key)))
+    for name, proc in summary["processes"].items():
+        stop = proc["stop_seconds"]
+        table.add_row(f"{name} exit", f"{proc['exit_code']}" + (" (killed)" if proc["killed"] else ""),
+                      "" if stop is None else f"stopped in {stop:.2f} s", "")
+    table.add_row("estops", str(summary["estops"]), "", "")
+    if summary.get("recording"):
+        table.add_row("recording", summary["recording"]["mcap"], f"{summary['recording']['messages']} messages", "")
+    table.add_row("result", "[green]OK[/green]" if summary["ok"] else "[red]FAILED[/red]", "", "")
+    Console().print(table)

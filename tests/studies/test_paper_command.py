@@ -1,0 +1,92 @@
+"""`sharedctl paper` writes Figures 1–8 and a summary; `run_figure` draws one run (short runs: fast)."""
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from matplotlib import image
+
+from sharedctl.services import cli
+from sharedctl.services.studies.paper import command as paper_command
+from sharedctl.services.studies.figures import feasible_mask, run_figure
+from sharedctl.services.scenario_files import load
+from sharedctl.simulator import simulate
+
+DURATION_S = 2.0
+TRAJECTORY_FIGURES = ("fig1_convex_trajectory.png", "fig5_nonconvex_trajectory.png")
+RESPONSE_FIGURES = ("fig2_convex_ce.png", "fig3_convex_nce.png", "fig4_convex_of.png",
+                    "fig6_nonconvex_ce.png", "fig7_nonconvex_nce.png", "fig8_nonconvex_of.png")
+
+
+@pytest.fixture(scope="module")
+def paper_dir(tmp_path_factory):
+    out = tmp_path_factory.mktemp("paper")
+    code = cli.main(["paper", "--out", str(out), "--duration", str(DURATION_S)])
+    return out, code
+
+
+def test_paper_exits_zero_when_every_run_is_safe_and_finite(paper_dir):
+    _, code = paper_dir
+    assert code == 0
+
+
+@pytest.mark.parametrize("name", TRAJECTORY_FIGURES + RESPONSE_FIGURES)
+def test_paper_writes_each_figure_as_a_decodable_png_of_the_expected_size(paper_dir, name):
+    out, _ = paper_dir
+    path = out / name
+    assert path.stat().st_size > 20_000
+    width_in, height_in = (15, 10) if name in TRAJECTORY_FIGURES else (15, 13)
+    pixels = image.imread(path)
+    assert pixels.shape == (height_in * paper_command.DPI, width_in * paper_command.DPI, 4)
+    assert pixels[..., :3].std() > 0.05   # not a blank page
+
+
+def test_summary_markdown_has_one_table_row_per_scenario_and_controller(paper_dir):
+    out, _ = paper_dir
+    text = (out / "summary.md").read_text()
+    for scenario in ("paper-convex", "paper-nonconvex"):
+        for controller in ("ce", "nce", "of"):
+            assert sum(line.startswith(f"| {scenario} | {controller} |") for line in text.splitlines()) == 1
+    for name in TRAJECTORY_FIGURES + RESPONSE_FIGURES:
+        assert f"`{name}`" in text
+
+
+def test_summary_json_records_six_safe_runs_of_the_requested_length(paper_dir):
+    out, _ = paper_dir
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["ok"] is True
+    assert [(r["scenario"], r["controller"]) for r in summary["runs"]] == [
+        (s, c) for s in ("paper-convex", "paper-nonconvex") for c in ("ce", "nce", "of")
+    ]
+    for record in summary["runs"]:
+        assert record["violations"] == 0
+        assert record["finite"] is True
+        assert record["steps"] == round(DURATION_S / record["dt"])
+        assert len(record["theta_hat"]) == len(record["theta_true"]) == 3
+
+
+def test_paper_rejects_an_unknown_controller():
+    with pytest.raises(SystemExit) as exc:
+        cli.main(["paper", "--out", "unused", "--controllers", "ce,pid"])
+    assert exc.value.code == 2
+
+
+def test_feasible_mask_shades_the_nonconvex_set_but_not_the_obstacle():
+    loop, _, _ = load("paper_nonconvex").closed_loop("ce")
+    X, Y = np.meshgrid([-1.0, 1.0], [-1.0, 1.0])   # (x, y) = (−1,−1), (1,−1), (−1,1), (1,1)
+    assert feasible_mask(loop.feasible, X, Y).tolist() == [[True, True], [True, False]]
+
+
+def test_run_figure_draws_six_labelled_panels_for_a_short_run(tmp_path):
+    scenario = load("paper_convex")
+    loop, q0, v0 = scenario.closed_loop("ce")
+    trace = simulate(loop, q0, v0, 0.5, scenario.dt)
+    figure = run_figure(trace, loop, title="paper-convex — ce")
+    titles = [ax.get_title() for ax in figure.axes]
+    assert [t[:3] for t in titles] == ["(a)", "(f)", "(b)", "(c)", "(d)", "(e)"]
+    assert all(ax.get_xlabel() and ax.get_ylabel() for ax in figure.axes)
+    path = tmp_path / "run.png"
+    figure.savefig(path, dpi=110)
+    assert path.stat().st_size > 20_000
+    assert image.imread(path).shape == (1100, 1650, 4)
