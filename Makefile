@@ -1,17 +1,20 @@
-# A fresh machine needs only python3 (>= 3.11) with venv: everything else comes from requirements.lock.
+# A fresh machine needs only python3 (>= 3.11) with venv: everything else comes from requirements/,
+# exact versions with their hashes (pip refuses any file whose hash is not listed).
 PYTHON ?= python3
 VENV   := .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 
-.PHONY: demo test setup clean paper
+.PHONY: demo test setup clean paper lock
 
 setup: $(STAMP)
 
-$(STAMP): pyproject.toml requirements.lock
+# requirements/test.lock is requirements/runtime.lock plus every extra (plots, baselines, test), with
+# pip and the build backend: the project is then installed without build isolation, so nothing is
+# fetched unhashed.
+$(STAMP): pyproject.toml requirements/runtime.lock requirements/test.lock
 	$(PYTHON) -m venv $(VENV)
-	$(BIN)/python -m pip install --quiet --upgrade pip==26.3
-	$(BIN)/python -m pip install --quiet -r requirements.lock
+	$(BIN)/python -m pip install --quiet --require-hashes -r requirements/test.lock
 	$(BIN)/python -m pip install --quiet --no-deps --no-build-isolation -e .
 	touch $(STAMP)
 
@@ -19,14 +22,33 @@ demo: $(STAMP)
 	mkdir -p out
 	$(BIN)/sharedctl demo --scenario paper_convex --json out/demo.json
 
-# Pure tests (simulations, codecs) on two workers; tests that start processes or open sockets
-# (marked `processes`) one at a time afterwards, so their timing is not disturbed by the workers.
+# Lint first (configuration in pyproject.toml, [tool.ruff]). Then the pure tests (simulations,
+# codecs) on two workers; tests that start processes or open sockets (marked `processes`) one at a
+# time afterwards, so their timing is not disturbed by the workers.
 test: $(STAMP)
+	$(BIN)/ruff check .
 	$(BIN)/python -m pytest -n 2 --dist loadfile -m "not processes"
 	$(BIN)/python -m pytest -m processes
 
 paper: $(STAMP)
 	$(BIN)/sharedctl paper --out docs/paper
+
+# Regenerates the locks from pyproject.toml's ranges (each lock's first lines repeat its command).
+# uv keeps every version already pinned that the ranges still allow; to move one, add
+# --upgrade-package NAME to its line. The test lock is constrained to the runtime lock, so the
+# two agree on every package they share. uv itself comes from requirements/tools.lock.
+LOCK_VENV := build/lock-venv
+UV        := $(LOCK_VENV)/bin/uv
+
+lock: $(UV)
+	$(UV) pip compile pyproject.toml requirements/build.in --universal --python-version 3.11 --generate-hashes -o requirements/runtime.lock
+	$(UV) pip compile pyproject.toml requirements/build.in --all-extras -c requirements/runtime.lock --universal --python-version 3.11 --generate-hashes -o requirements/test.lock
+	$(UV) pip compile requirements/tools.in --universal --python-version 3.11 --generate-hashes -o requirements/tools.lock
+
+$(UV): requirements/tools.lock
+	$(PYTHON) -m venv $(LOCK_VENV)
+	$(LOCK_VENV)/bin/python -m pip install --quiet --require-hashes -r requirements/tools.lock
+	touch $(UV)
 
 clean:
 	rm -rf $(VENV) build *.egg-info

@@ -2,7 +2,9 @@
 
 Modules
 -------
-``cansimple``      typed ODrive CANSimple 0.6 frames <-> :class:`CanFrame` (``encode``, ``decode_frame``, ``poll``)
+``cansimple``      typed ODrive CANSimple 0.6 frames <-> :class:`CanFrame` (``encode``, ``decode_frame``, ``poll``;
+                   per period: ``torque_frame``, ``periodic_kind``, ``encoder_estimates``)
+``cancodec``       a frame kind's signal table compiled once into a ``struct.Struct`` codec
 ``canframe``       the raw frame and the ``node_id << 5 | cmd_id`` id layout
 ``odrive_enums``   AxisState, ControlMode, InputMode, ProcedureResult, ODriveError, CommandId
 ``dbc``            generator of ``odrive_cansimple.dbc`` from the codec table

@@ -3,6 +3,15 @@
 One table (:data:`FRAME_SPECS`) describes every implemented command: DBC name,
 command id, DLC, sender and signals (start bit, length, type, unit). The codec,
 the DBC generator (:mod:`.dbc`) and protocol/README.md all follow that table.
+Each kind's entry is compiled once, at import, into a :class:`~.cancodec.FrameCodec`
+(:data:`CODECS`, one `struct.Struct` per kind); :func:`encode`, :func:`decode_frame`
+and the per-period entry points use these and nothing else.
+
+Per-period entry points (the frames of every control period, without a typed frame):
+:func:`torque_frame` gives the id and bytes of Set_Input_Torque; :func:`periodic_kind`
+tells a Set_Input_Torque or a Get_Encoder_Estimates that :func:`decode` would accept
+from everything else (which goes to :func:`decode`, to be decoded or refused);
+:data:`encoder_estimates` reads the estimate's values.
 
 Rules
 -----
@@ -20,9 +29,19 @@ from __future__ import annotations
 
 from collections.abc import Collection
 from dataclasses import dataclass, fields
+from math import isfinite
 
-from .canframe import CanFrame, arbitration_id, check_node_id, split_arbitration_id
-from .canspec import FrameSpec, SignalKind, SignalSpec, to_float32  # noqa: F401 (to_float32 re-exported)
+from .cancodec import FrameCodec
+from .canframe import (
+    MAX_CMD_ID,
+    MAX_NODE_ID,
+    MAX_STANDARD_ID,
+    CanFrame,
+    arbitration_id,
+    check_node_id,
+    split_arbitration_id,
+)
+from .canspec import FrameSpec, SignalKind, SignalSpec, to_float32 as to_float32  # to_float32: re-exported
 from .errors import BadArbitrationId, BadLength, BadNodeId, UnexpectedRemote, UnknownCommand, WrongType
 from .odrive_enums import AxisState, CommandId, ControlMode, InputMode, ODriveError, ProcedureResult
 
@@ -286,17 +305,20 @@ assert all(  # the table and the dataclasses describe the same fields
 )
 
 
+#: each kind's codec, compiled once from its table entry; `encode`, `decode_frame` and the
+#: per-period entry points below all go through these
+CODECS: dict[type, FrameCodec] = {cls: FrameCodec(spec) for cls, spec in FRAME_SPECS.items()}
+
+
 def encode(message: CanMessage) -> CanFrame:
     """Encode a typed frame (or :class:`PollRequest`) as a :class:`CanFrame`."""
     if isinstance(message, PollRequest):
         return CanFrame(arbitration_id(message.node_id, message.command), b"", True, message.dlc)
-    spec = FRAME_SPECS.get(type(message))
-    if spec is None:
+    codec = CODECS.get(type(message))
+    if codec is None:
         raise WrongType(f"{type(message).__name__} is not a CANSimple frame type")
-    raw = 0
-    for sig in spec.signals:  # values were validated when the frame was built; re-check anyway
-        raw |= (sig.to_raw(sig.coerce(getattr(message, sig.attr))) & sig.mask) << sig.start
-    return CanFrame(arbitration_id(message.node_id, spec.cmd), raw.to_bytes(spec.dlc, "little"))
+    # values were validated when the frame was built; the codec checks them again
+    return CanFrame(arbitration_id(message.node_id, codec.spec.cmd), codec.pack(codec.values_of(message)))
 
 
 def poll(node_id: int, command: CommandId, dlc: int = 8) -> CanFrame:
@@ -320,16 +342,15 @@ def decode_frame(frame: CanFrame, *, nodes: Collection[int] | None = None) -> Ca
     cls = CLASS_BY_CMD.get(cmd_id)
     if cls is None:
         raise UnknownCommand(f"command id 0x{cmd_id:02X} is not implemented")
-    spec = FRAME_SPECS[cls]
+    codec = CODECS[cls]
+    spec = codec.spec
     if frame.is_remote:
         if not spec.pollable:
             raise UnexpectedRemote(f"RTR on {spec.name}, which is not a Get_* frame")
         return PollRequest(node_id, spec.cmd, frame.dlc)
     if frame.dlc != spec.dlc:
         raise BadLength(f"{spec.name} has DLC {spec.dlc}, got {frame.dlc}")
-    raw = int.from_bytes(frame.data, "little")
-    values = [sig.from_raw((raw >> sig.start) & sig.mask) for sig in spec.signals]
-    return cls(node_id, *values)
+    return cls(node_id, *codec.unpack(frame.data))
 
 
 def decode(
@@ -344,3 +365,64 @@ def decode(
     """Decode raw frame fields (as python-can's ``Message`` carries them)."""
     frame = CanFrame(arbitration_id, data, is_remote, dlc, is_extended_id)
     return decode_frame(frame, nodes=nodes)
+
+
+# --- the frames of every control period ----------------------------------------------------------
+# At 500 Hz the controller sends three Set_Input_Torque frames and reads three Get_Encoder_Estimates
+# (and, on udp_multicast, its own three torque frames back): the entry points below handle exactly
+# those through the same compiled codecs, without a typed frame per frame.
+
+#: the kinds `periodic_kind` recognises. Set_Input_Torque carries one float32, Get_Encoder_Estimates
+#: two, none with a minimum, DLC 8 (checked here): a frame of either is accepted by `decode`
+#: exactly when its DLC is 8 and its values are finite
+PERIODIC_KINDS: tuple[type, ...] = (SetInputTorque, GetEncoderEstimates)
+assert [([(s.kind, s.minimum) for s in FRAME_SPECS[cls].signals], FRAME_SPECS[cls].dlc) for cls in PERIODIC_KINDS] \
+    == [([("float", None)], 8), ([("float", None), ("float", None)], 8)]
+
+_TORQUE_CMD = int(FRAME_SPECS[SetInputTorque].cmd)
+_ENCODER_CMD = int(FRAME_SPECS[GetEncoderEstimates].cmd)
+_TORQUE_IDS = {n: arbitration_id(n, _TORQUE_CMD) for n in range(MAX_NODE_ID + 1)}
+_TORQUE_SIGNAL = FRAME_SPECS[SetInputTorque].signals[0]
+_TORQUE_PACK = CODECS[SetInputTorque].layout.pack
+_TORQUE_UNPACK = CODECS[SetInputTorque].layout.unpack
+
+
+def torque_frame(node_id: int, torque: float) -> tuple[int, bytes]:
+    """``(arbitration_id, data)`` of Set_Input_Torque ``torque`` [Nm] to ``node_id``: those of
+    ``encode(SetInputTorque(node_id, torque))``, with the same typed errors (a NaN/inf torque is
+    :class:`NonFiniteValue`, beyond float32 :class:`OutOfRange`, a bad node :class:`BadNodeId`)."""
+    arb = _TORQUE_IDS.get(node_id) if type(node_id) is int else None
+    if arb is None:
+        arb = arbitration_id(node_id, _TORQUE_CMD)
+    if type(torque) is float and isfinite(torque):
+        try:
+            return arb, _TORQUE_PACK(torque)      # rounds to float32 as `to_float32` does
+        except OverflowError:
+            pass
+    return arb, _TORQUE_PACK(_TORQUE_SIGNAL.to_field(torque))    # anything else: the signal's own check
+
+
+#: ``encoder_estimates(data) -> (pos_estimate turns, vel_estimate turns/s)``: the values ``decode``
+#: gives the data of a frame `periodic_kind` called :class:`GetEncoderEstimates` (the compiled
+#: codec's own unpack, without a call around it)
+encoder_estimates = CODECS[GetEncoderEstimates].layout.unpack
+
+
+def periodic_kind(arbitration_id: int, dlc: int, data: bytes, is_remote: bool = False,
+                  is_extended_id: bool = False, nodes: Collection[int] | None = None) -> type | None:
+    """:class:`SetInputTorque` or :class:`GetEncoderEstimates` if ``decode`` (same arguments) would
+    return a frame of that kind, else None: every other frame, and every frame ``decode`` refuses,
+    goes to ``decode``. Never raises. Fields of other types than the transports give (``data`` not
+    ``bytes``, ``dlc`` or ``arbitration_id`` not ``int``) answer None, for ``decode`` to judge."""
+    if (is_remote is not False or is_extended_id is not False or type(arbitration_id) is not int
+            or type(data) is not bytes or type(dlc) is not int or dlc != 8 or len(data) != 8
+            or not 0 <= arbitration_id <= MAX_STANDARD_ID
+            or (nodes is not None and (arbitration_id >> 5) not in nodes)):
+        return None
+    cmd = arbitration_id & MAX_CMD_ID
+    if cmd == _ENCODER_CMD:
+        pos, vel = encoder_estimates(data)
+        return GetEncoderEstimates if isfinite(pos) and isfinite(vel) else None
+    if cmd == _TORQUE_CMD:
+        return SetInputTorque if isfinite(_TORQUE_UNPACK(data)[0]) else None
+    return None

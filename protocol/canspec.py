@@ -60,6 +60,8 @@ class SignalSpec:
             if not isinstance(value, bool):
                 raise WrongType(f"{self.attr} must be a bool")
             return value
+        if type(value) is self.enum and 0 <= value <= self.mask:
+            return value                         # a member of the signal's enum, in its bits
         if isinstance(value, bool) or not isinstance(value, int):
             raise WrongType(f"{self.attr} must be an int or {self.enum.__name__}")
         if not 0 <= value <= self.mask:
@@ -69,16 +71,26 @@ class SignalSpec:
         except ValueError:
             raise OutOfRange(f"{self.attr} {value} is not a {self.enum.__name__}") from None
 
-    def to_raw(self, value: object) -> int:
-        """Bits of an already-coerced value."""
+    @property
+    def struct_code(self) -> str:
+        """The little-endian `struct` field that carries this signal from its start byte: ``f`` for a
+        float32, else the narrowest unsigned integer holding ``length`` bits (``B``, ``H``, ``I``, ``Q``)."""
         if self.kind == "float":
-            return int.from_bytes(_F32.pack(value), "little")
-        return int(value)
+            return "f"
+        return next(code for code, bits in (("B", 8), ("H", 16), ("I", 32), ("Q", 64)) if self.length <= bits)
 
-    def from_raw(self, bits: int) -> object:
-        """Canonical value of the raw bits (raises the typed error for invalid bits)."""
+    def to_field(self, value: object) -> object:
+        """The `struct` field value of a Python value (validated and canonicalised by :meth:`coerce`)."""
         if self.kind == "float":
-            return to_float32(_F32.unpack(bits.to_bytes(4, "little"))[0], self.attr, self.minimum)
+            return to_float32(value, self.attr, self.minimum)
+        return int(self.coerce(value))
+
+    def from_field(self, field: object) -> object:
+        """Canonical value of an unpacked `struct` field; bits beyond ``length`` are ignored. Raises the
+        typed error for invalid contents (NaN/inf, below ``minimum``, not an enum member, a bool above 1)."""
+        if self.kind == "float":
+            return to_float32(field, self.attr, self.minimum)
+        bits = field & self.mask
         if self.kind == "bool":
             if bits > 1:
                 raise OutOfRange(f"{self.attr} {bits} is neither 0 nor 1")

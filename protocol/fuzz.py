@@ -293,7 +293,7 @@ def fuzz_inputs(name: str, inputs: Iterator[Any], decode: Callable[[Any], Any],
             report.typed_errors += 1
             report.errors[type(exc).__name__] += 1
             continue
-        except Exception as exc:  # noqa: BLE001 - an escape is exactly what the campaign looks for
+        except Exception as exc:  # noqa: BLE001 — an escape is exactly what the campaign looks for
             report.escapes += 1
             if len(report.examples) < 5:
                 report.examples.append(f"{name}: {type(exc).__name__}: {exc!s:.120} on {item!r:.200}")

@@ -7,15 +7,25 @@ deploy/vcan-setup.sh), and otherwise python-can's `udp_multicast` on the IPv4 gr
 239.74.163.2 with `hop_limit=0`, so frames never leave this host. udp_multicast always gets
 hop_limit=0 here, whatever the options say.
 
+`open_transport` gives the bus as a transport (services/can_transport/: udp_multicast on a socket
+of its own, any other interface through python-can); `open_bus` gives a python-can bus, for
+callers that want `can.Message`s (the recorder, the bench's listener, tests).
+
 Note: on udp_multicast a bus also receives the frames it sends itself (multicast loopback);
 every receiver in this project ignores frames of the direction it sends.
 """
 from __future__ import annotations
 
+import importlib
 import os
+import socket
 from dataclasses import dataclass, field
 
 import can
+
+from . import can_transport
+from .can_transport import PythonCanTransport, Transport
+from .can_transport.udp_multicast import enlarge_receive_buffer
 
 UDP_GROUP = "239.74.163.2"
 DEFAULT_UDP_PORT = 43113
@@ -57,7 +67,8 @@ def parse_options(pairs: list[str] | None) -> dict:
     return options
 
 
-def resolve(interface: str | None, channel: str | None, options: dict | None = None, udp_port: int | None = None) -> BusSpec:
+def resolve(interface: str | None, channel: str | None, options: dict | None = None,
+            udp_port: int | None = None) -> BusSpec:
     """Choose the bus: explicit arguments, else vcan0, else host-local udp_multicast."""
     options = dict(options or {})
     if interface is None:
@@ -75,39 +86,44 @@ def resolve(interface: str | None, channel: str | None, options: dict | None = N
     return BusSpec(interface, channel, options)
 
 
-#: receive buffer asked for on udp_multicast sockets: the default (~208 KiB) overflows when a
-#: reader stalls for a few tens of milliseconds behind 3,000 frames/s
-UDP_RECEIVE_BUFFER = 4 * 1024 * 1024
+def open_transport(spec: BusSpec) -> Transport:
+    """Open the bus as a transport (services/can_transport/); the caller must `shutdown()` it.
+
+    The plug-in of services/can_transport/ named after the interface opens it if there is one
+    (udp_multicast: a socket of its own, hop limit 0); any other interface is a python-can bus
+    (`open_bus`) read and written through its public `recv`/`send`."""
+    plugin, name = None, f"{can_transport.__name__}.{spec.interface}"
+    if spec.interface.isidentifier():
+        try:
+            plugin = importlib.import_module(name)
+        except ModuleNotFoundError as exc:
+            if exc.name != name:
+                raise
+    opener = getattr(plugin, "open_transport", None)
+    if opener is None:
+        return PythonCanTransport(open_bus(spec))
+    return opener(spec.channel, spec.options)
 
 
 def open_bus(spec: BusSpec) -> can.BusABC:
-    """Open the bus; the caller must `shutdown()` it."""
+    """Open the bus as a python-can bus (for callers that want `can.Message`s); the caller must `shutdown()` it."""
     bus = can.Bus(interface=spec.interface, channel=spec.channel, **spec.options)
     if spec.interface == "udp_multicast":
         _enlarge_receive_buffer(bus)
     return bus
 
 
-def _enlarge_receive_buffer(bus) -> None:
-    """Best effort: SO_RCVBUFFORCE (needs CAP_NET_ADMIN), else SO_RCVBUF (capped by rmem_max)."""
-    import socket
-
-    sock = getattr(getattr(bus, "_multicast", None), "_socket", None)
-    if sock is None:
-        return
-    for option in (getattr(socket, "SO_RCVBUFFORCE", None), socket.SO_RCVBUF):
-        if option is None:
-            continue
-        try:
-            sock.setsockopt(socket.SOL_SOCKET, option, UDP_RECEIVE_BUFFER)
-            return
-        except OSError:
-            continue
+def _enlarge_receive_buffer(bus: can.BusABC) -> None:
+    """The udp_multicast transport's receive buffer (`RECEIVE_BUFFER`), best effort, on a duplicate of
+    the bus's public `fileno()`."""
+    with socket.socket(fileno=os.dup(bus.fileno())) as sock:
+        enlarge_receive_buffer(sock)
 
 
 def add_arguments(parser) -> None:
     """The CAN options every CAN-speaking command takes."""
-    parser.add_argument("--can-interface", help="python-can interface (default: socketcan if vcan0 exists, else udp_multicast)")
+    parser.add_argument("--can-interface",
+                        help="python-can interface (default: socketcan if vcan0 exists, else udp_multicast)")
     parser.add_argument("--can-channel", help="channel (default: vcan0, or the multicast group for udp_multicast)")
     parser.add_argument("--can-option", action="append", metavar="KEY=VALUE", help="extra can.Bus option (repeatable)")
 

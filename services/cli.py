@@ -5,6 +5,10 @@ it adds the sub-command and sets ``handler`` (a function taking the parsed args,
 exit code) with ``parser.set_defaults(handler=...)``. Only the module of the command being run
 is imported (a robot or controller process does not pay for matplotlib); ``--help`` and an
 unknown command import them all.
+
+The processes need only the runtime dependencies; some studies need a module that comes with an
+extra of pyproject.toml (EXTRAS). A command whose module, or whose run, finds that module missing
+stops with a message naming the extra to install, and ``--help`` still lists every command.
 """
 from __future__ import annotations
 
@@ -34,6 +38,38 @@ COMMANDS = {
 }
 
 
+# Top-level module -> the extra of pyproject.toml's [project.optional-dependencies] that brings it.
+EXTRAS = {
+    "matplotlib": "plots",
+    "quadprog": "baselines",
+}
+
+# Options whose study imports an extra's module only when it gets there (at the end of a long
+# run): checked before the command starts instead.
+OPTION_NEEDS = {
+    ("sim", "plot"): "matplotlib",
+    ("compare", "report"): "matplotlib",
+    ("faults", "report"): "matplotlib",
+}
+
+
+def missing_extra(exc: ModuleNotFoundError) -> str | None:
+    """The extra that would provide the module `exc` did not find, if that module comes with one."""
+    return EXTRAS.get((exc.name or "").partition(".")[0])
+
+
+def extra_message(command: str, exc: ModuleNotFoundError) -> str:
+    extra = missing_extra(exc)
+    return (f"sharedctl {command}: needs {exc.name}, which comes with the '{extra}' extra: "
+            f"pip install 'sharedctl[{extra}]'")
+
+
+def _add_unavailable(subparsers, command: str, exc: ModuleNotFoundError) -> str:
+    """List `command` in ``--help`` with the extra it needs; returns what `main` says if it is run."""
+    subparsers.add_parser(command, add_help=False, help=f"(needs pip install 'sharedctl[{missing_extra(exc)}]')")
+    return extra_message(command, exc)
+
+
 def build_parser(command: str | None = None) -> argparse.ArgumentParser:
     """The parser of one sub-command (`command`, if it is a known name), else of all of them."""
     parser = argparse.ArgumentParser(
@@ -41,14 +77,19 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
         description="Shared-control teleoperation: simulation, services and tools.",
     )
     subparsers = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    parser.unavailable = {}     # command -> why it cannot run here (its extra is not installed)
     modules = [COMMANDS[command]] if command in COMMANDS else list(dict.fromkeys(COMMANDS.values()))
     for module_name in modules:
         try:
             module = importlib.import_module(module_name)
-        except ModuleNotFoundError as exc:  # a command not built yet must not break the others
+        except ModuleNotFoundError as exc:
+            if missing_extra(exc):
+                for name in (n for n, m in COMMANDS.items() if m == module_name):
+                    parser.unavailable[name] = _add_unavailable(subparsers, name, exc)
+                continue
             if exc.name is None or not module_name.startswith(exc.name):
                 raise
-            continue
+            continue    # a command not built yet must not break the others
         module.add_parser(subparsers)
     return parser
 
@@ -58,13 +99,25 @@ def main(argv: list[str] | None = None) -> int:
 
     argv = list(sys.argv[1:] if argv is None else argv)
     parser = build_parser(argv[0] if argv else None)
+    if argv and argv[0] in parser.unavailable:
+        print(parser.unavailable[argv[0]], file=sys.stderr)
+        return 2
     try:
         argv = expand(argv, parser)   # --service-config FILE.toml
     except ServiceConfigError as exc:
         print(f"sharedctl: {exc}", file=sys.stderr)
         return 2
     args = parser.parse_args(argv)
-    return int(args.handler(args) or 0)
+    try:
+        for (command, option), module in OPTION_NEEDS.items():
+            if args.command == command and getattr(args, option, None):
+                importlib.import_module(module)
+        return int(args.handler(args) or 0)
+    except ModuleNotFoundError as exc:     # a study that imports its extra only when it gets there
+        if not missing_extra(exc):
+            raise
+        print(extra_message(args.command, exc), file=sys.stderr)
+        return 2
 
 
 if __name__ == "__main__":

@@ -28,7 +28,7 @@ class ServiceConfigError(ValueError):
 
 def _subparser(parser: argparse.ArgumentParser, command: str) -> argparse.ArgumentParser | None:
     for action in parser._actions:                      # noqa: SLF001 — argparse has no public accessor
-        if isinstance(action, argparse._SubParsersAction):  # noqa: SLF001
+        if isinstance(action, argparse._SubParsersAction):  # noqa: SLF001 — nor a public class for sub-commands
             return action.choices.get(command)
     return None
 
@@ -93,7 +93,7 @@ def expand(argv: list[str], parser: argparse.ArgumentParser) -> list[str]:
         i += 1
     from_files: list[str] = []
     for name in files:
-        from_files += options_from_file(Path(name), sub._option_string_actions)   # noqa: SLF001
+        from_files += options_from_file(Path(name), sub._option_string_actions)   # noqa: SLF001 — argparse's option table
     return [command, *from_files, *remaining]
 
 

@@ -118,7 +118,8 @@ class GroupStack:
 
     @staticmethod
     def of(groups) -> "GroupStack":
-        return GroupStack(np.stack([g.K for g in groups]), np.stack([g.T for g in groups]), np.stack([g.K_inv for g in groups]))
+        return GroupStack(np.stack([g.K for g in groups]), np.stack([g.T for g in groups]),
+                          np.stack([g.K_inv for g in groups]))
 
 
 @dataclass(frozen=True)

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import math
 from abc import ABC, abstractmethod
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Callable
 
 import numpy as np
@@ -78,9 +78,22 @@ class HumanCommand:
     intent: float            # v_h (45)
 
 
-def intent(kp: np.ndarray, deflection: np.ndarray) -> float:
-    """v_h = ½ k_p |q̂_h|² (45)."""
-    return 0.5 * float(kp @ (deflection * deflection))
+def intent(kp, deflection):
+    """v_h = ½ Σ_j k_p,j q̂_h,j² (45): the energy stored in the joystick spring (44).
+
+    On sequences of Python floats (what the controller's policy has from the wire) a loop on
+    floats, no array built. On numpy arrays the sum runs over the first axis: a float for
+    n-vectors, one v_h per robot for deflections (n, N) with k_p (n, N) or (n, 1) (the batched
+    runs).
+    """
+    if isinstance(deflection, np.ndarray):
+        if deflection.ndim == 1:
+            return 0.5 * float(np.dot(kp, deflection * deflection))
+        return 0.5 * np.sum(kp * (deflection * deflection), axis=0)
+    total = 0.0
+    for k, d in zip(kp, deflection):
+        total += k * d * d
+    return 0.5 * total
 
 
 class HumanModel(ABC):

@@ -8,7 +8,8 @@ from .simulator import Trace
 
 
 def summarize(trace: Trace, dt: float) -> dict:
-    """violations, min_margin, tracking_rmse, final_error, human_authority, switches, theta_hat, finite, steps, duration.
+    """violations, min_margin, tracking_rmse, final_error, human_authority, switches, theta_hat, finite, steps,
+    duration.
 
     * violations: samples where q is in no region of the feasible set;
     * min_margin: min over time of the best region's smallest slack −(K q + T) (unit rows);

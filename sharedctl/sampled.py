@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .metrics import summarize  # noqa: F401  (re-exported for callers comparing runs)
+from .metrics import summarize  # noqa: F401 — re-exported for callers comparing runs
 from .shared_controller import OperatorInput, SharedController
 from .simulator import ClosedLoop, Trace, _Recorder
 

@@ -168,11 +168,13 @@ def build(data: dict, controller: str | None):
     except ValueError as exc:
         raise ScenarioError(f"sharing/reference: {exc}") from None
     if bands.b0 >= shape.epsilon:
-        raise ScenarioError("sharing.b0 must be smaller than reference.epsilon (the projection must lie outside the inner band)")
+        raise ScenarioError("sharing.b0 must be smaller than reference.epsilon "
+                            "(the projection must lie outside the inner band)")
     dwell = sharing.get("min_machine_dwell", 0.25)
     if isinstance(dwell, bool) or not isinstance(dwell, (int, float)) or not (0 <= dwell < 1e3):
         raise ScenarioError("sharing.min_machine_dwell must be a number of seconds >= 0")
-    params = SharingParameters(bands, _number(sharing, "blend_time_constant", 0.3, "sharing.", True), mode, float(dwell))
+    params = SharingParameters(bands, _number(sharing, "blend_time_constant", 0.3, "sharing.", True),
+                               mode, float(dwell))
 
     kind_ctrl = controller or data.get("controller", "ce")
     try:

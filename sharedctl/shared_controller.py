@@ -104,8 +104,8 @@ class SharedController:
         intent = 0.0 if mode is Mode.MACHINE else operator.intent
         q_list, v_list = floats(q), v_used.tolist()
         rows = feasible.row_values(q_list, v_list)
-        every_group = _EveryGroupOnDemand(feasible, np.array(q_list), np.array(v_list), operator.desired, self.reference,
-                                          machine.tracking.lam)
+        every_group = _EveryGroupOnDemand(feasible, np.array(q_list), np.array(v_list), operator.desired,
+                                          self.reference, machine.tracking.lam)
         arbiter, decision = arbitrate(feasible, self.sharing, state.arbiter, q, v_used, intent, dt,
                                       every_group.lyapunov, every_group, rows)
 
@@ -113,9 +113,11 @@ class SharedController:
         engaged = decision.authority is not Authority.HUMAN and decision.group is not None
         if engaged:
             grp = feasible.groups[decision.group]
-            c = coordinates(grp, q_list, v_list, operator.desired, self.reference, feasible.group_rows(decision.group, rows))
+            c = coordinates(grp, q_list, v_list, operator.desired, self.reference,
+                            feasible.group_rows(decision.group, rows))
         previous_law = machine.law(law_role) if law_role is not None else None
-        if engaged and (law_role is None or decision.group_changed or decision.role_changed or law_role is not decision.role):
+        if engaged and (law_role is None or decision.group_changed or decision.role_changed
+                        or law_role is not decision.role):
             if previous_law is not None:
                 theta_hat = previous_law.estimate(theta_hat, law_state)
             law_role = decision.role

@@ -185,7 +185,8 @@ def arbitrate(
     role = state.role
     if overall is SetClass.HAZARD:
         role = LawRole.HAZARD
-    elif role is LawRole.HAZARD and overall is SetClass.SAFE and _clear_of_faces(feasible, state.group, q, params.bands, rows):
+    elif (role is LawRole.HAZARD and overall is SetClass.SAFE
+          and _clear_of_faces(feasible, state.group, q, params.bands, rows)):
         role = LawRole.TRACKING
     # otherwise hold the role: the hazard law keeps running until the state is safe *and*
     # outside the inner band of its group (a law-level Schmitt trigger). The tracking law

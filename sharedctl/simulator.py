@@ -115,7 +115,9 @@ class Trace:
 
 class _Recorder:
     def __init__(self, steps, n, n_theta):
-        z = lambda *s: np.full((steps,) + s, np.nan)
+        def z(*shape):
+            return np.full((steps,) + shape, np.nan)
+
         self.cols = {k: z(n) for k in ("q", "v", "v_hat", "q_d", "q_r", "u_h", "u_f", "u_s", "tau")}
         self.cols["theta_hat"] = z(n_theta)
         for k in ("t", "k_h", "k_f", "intent", "margin"):
@@ -143,7 +145,8 @@ def simulate(loop: ClosedLoop, q0, v0, duration: float, dt: float) -> Trace:
     theta_hat = np.zeros(n_theta) if loop.theta_hat0 is None else np.asarray(loop.theta_hat0, float).copy()
     observer = ctrl.observer
     obs = observer.initial_state(q) if observer else np.zeros(0)   # v̂(0) = 0: the true q̇(0) is not measured
-    arbiter = ArbiterState(machine_latched=loop.sharing.mode is Mode.MACHINE, k_h=0.0 if loop.sharing.mode is Mode.MACHINE else 1.0)
+    arbiter = ArbiterState(machine_latched=loop.sharing.mode is Mode.MACHINE,
+                           k_h=0.0 if loop.sharing.mode is Mode.MACHINE else 1.0)
     law: MachineLaw | None = None
     law_state = np.zeros(0)
     engaged_before = False
@@ -194,7 +197,8 @@ def simulate(loop: ClosedLoop, q0, v0, duration: float, dt: float) -> Trace:
         intent = 0.0 if loop.sharing.mode is Mode.MACHINE else human.command_from(t, desired, q, v).intent
         q_r_all, values = all_groups(feasible.stack, q, v_meas, desired, loop.reference, ctrl.tracking.lam)
         ref_ok = feasible.reference_inside(q_r_all)
-        arbiter, decision = arbitrate(feasible, loop.sharing, arbiter, q, v_meas, intent, dt, values.__getitem__, ref_ok)
+        arbiter, decision = arbitrate(feasible, loop.sharing, arbiter, q, v_meas, intent, dt,
+                                      values.__getitem__, ref_ok)
         engaged = decision.authority is not Authority.HUMAN and decision.group is not None
         if engaged and (not engaged_before or decision.group_changed or decision.role_changed or law is None):
             if law is not None and law_state.size:
@@ -215,7 +219,8 @@ def simulate(loop: ClosedLoop, q0, v0, duration: float, dt: float) -> Trace:
             k += 1
             break
         u_h, u_f, u_s, v_meas, desired = signals
-        ref_group = decision.group if engaged else select_group(feasible, decision.situation, values.__getitem__, ref_ok)
+        ref_group = (decision.group if engaged
+                     else select_group(feasible, decision.situation, values.__getitem__, ref_ok))
         q_r = q_r_all[ref_group] if ref_group is not None else np.full(n, np.nan)
         estimate = law.estimate(theta_hat, law_state) if (law is not None and law_state.size) else theta_hat
         rec.put(

@@ -91,7 +91,8 @@ def coordinates(group: ConstraintGroup, q, v, desired: Desired, shape: Reference
     x_r_ddot = [d2 * (md * md) + d1 * mdd for d1, d2, md, mdd in zip(s1, s2, m_dot, m_ddot)]
     z = [_log_ratio(xj, xr) for xj, xr in zip(x, x_r)]
     q_r = matvec(f.K_inv, [xr - t for xr, t in zip(x_r, T)])
-    return GroupCoordinates(CoordinateFloats(list(x), list(x_dot), x_r, x_r_dot, x_r_ddot, z, q_r, matvec(f.K_inv, x_r_dot)))
+    return GroupCoordinates(CoordinateFloats(list(x), list(x_dot), x_r, x_r_dot, x_r_ddot, z, q_r,
+                                             matvec(f.K_inv, x_r_dot)))
 
 
 def _log_ratio(x: float, x_r: float) -> float:

@@ -28,7 +28,8 @@ def omni_loop(K, T, trajectory, controller="ce", mode=Mode.MACHINE, gains=None, 
     feasible = FeasibleSet.from_regions([Polytope.from_rows(K, T)])
     human = human or ScriptedOperator(trajectory, np.full(3, 20.0), np.full(3, 12.0))
     return ClosedLoop(
-        model, feasible, human, make_controller(controller, gains), SharingParameters(mode=mode, **sharing), ReferenceShape()
+        model, feasible, human, make_controller(controller, gains), SharingParameters(mode=mode, **sharing),
+        ReferenceShape(),
     )
 
 

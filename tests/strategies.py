@@ -407,18 +407,18 @@ def adversarial_case(seed: int) -> Case:
     magnitude = rng.uniform(50.0, 200.0)
     if style == "constant":
         force = magnitude * normal
-        fn = lambda t, q, v, f=force: f
+        fn = lambda t, q, v, f=force: f  # noqa: E731 — the push as one expression per style
     elif style == "bang-bang":
         period = rng.uniform(0.2, 0.6)
         force = magnitude * normal
-        fn = lambda t, q, v, f=force, p=period: f if int(t / p) % 2 == 0 else -0.5 * f
+        fn = lambda t, q, v, f=force, p=period: f if int(t / p) % 2 == 0 else -0.5 * f  # noqa: E731 — the push as one expression per style
     else:
         times = np.arange(0.0, 10.0, 0.2)
         forces = np.zeros((times.size, 3))
         forces[:, :2] = rng.uniform(-1, 1, size=(times.size, 2))
         forces[:, :2] *= (rng.uniform(50.0, 200.0, times.size) / np.linalg.norm(forces[:, :2], axis=1))[:, None]
         forces[:, 2] = rng.uniform(-10.0, 10.0, times.size)
-        fn = lambda t, q, v, ts=times, fs=forces: fs[min(int(t / 0.2), len(fs) - 1)]
+        fn = lambda t, q, v, ts=times, fs=forces: fs[min(int(t / 0.2), len(fs) - 1)]  # noqa: E731 — the push as one expression per style
     human = ArbitraryOperator(base.human.trajectory, np.full(3, KP), function=fn)
     return Case(f"adversarial_case({seed})", "omni3", regions, q0, base.v0, human, duration=4.0,
                 notes=f"{style} push {magnitude:.0f} N; base {base.notes}")

@@ -21,10 +21,10 @@ import pytest
 from hypothesis import given, settings
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-import strategies as S  # noqa: E402
+import strategies as S
 
-from sharedctl.sets import SetClass  # noqa: E402
-from sharedctl.sharing import Authority, Mode, SharingParameters  # noqa: E402
+from sharedctl.sets import SetClass
+from sharedctl.sharing import Authority, Mode, SharingParameters
 
 LINES = {"up-right": (0.4, 0.3), "down-left": (-0.3, -0.2)}
 

@@ -47,9 +47,11 @@ def _assert_same(loops, q0, v0, duration=DURATION):
         got = batch.trace(i, loop.model)
         assert got.t.size == ref.t.size, f"robot {i}: {got.t.size} samples, scalar {ref.t.size}"
         for name in ("q", "v", "v_hat", "theta_hat"):
-            np.testing.assert_allclose(getattr(got, name), getattr(ref, name), rtol=0, atol=STATE_TOL, err_msg=f"robot {i} {name}")
+            np.testing.assert_allclose(getattr(got, name), getattr(ref, name), rtol=0, atol=STATE_TOL,
+                                       err_msg=f"robot {i} {name}")
         for name in ("u_h", "u_f", "u_s", "tau"):
-            np.testing.assert_allclose(getattr(got, name), getattr(ref, name), rtol=0, atol=FORCE_TOL, err_msg=f"robot {i} {name}")
+            np.testing.assert_allclose(getattr(got, name), getattr(ref, name), rtol=0, atol=FORCE_TOL,
+                                       err_msg=f"robot {i} {name}")
         for name in ("authority", "group", "role", "set_class", "inside"):
             np.testing.assert_array_equal(getattr(got, name), getattr(ref, name), err_msg=f"robot {i} {name}")
         assert (got.switches, got.group_switches, got.finite) == (ref.switches, ref.group_switches, ref.finite)
@@ -92,8 +94,10 @@ def test_robots_may_differ_in_operator_and_estimate():
     kp = np.full(3, 20.0)
     humans = [
         base.human,
-        ScriptedOperator(LineTrajectory(np.array([-0.9, 1.0, 0.0]), np.array([0.0, 0.9, 0.2])), kp * 2.0, np.full(3, 5.0)),
-        AdversarialOperator(LineTrajectory(np.array([-2.0, 2.0, 0.0]), np.zeros(3)), kp, np.array([-2.0, 2.0, 0.0]), 0.5),
+        ScriptedOperator(LineTrajectory(np.array([-0.9, 1.0, 0.0]), np.array([0.0, 0.9, 0.2])), kp * 2.0,
+                         np.full(3, 5.0)),
+        AdversarialOperator(LineTrajectory(np.array([-2.0, 2.0, 0.0]), np.zeros(3)), kp, np.array([-2.0, 2.0, 0.0]),
+                            0.5),
     ]
     loops = [ClosedLoop(base.model, base.feasible, h, base.controller, base.sharing, base.reference, th)
              for h, th in zip(humans, ([0.0, 0.0, 0.0], [10.0, 1.0, 5.0], [20.0, 2.0, 8.0]))]
@@ -112,14 +116,16 @@ def test_an_escape_is_recorded_as_the_scalar_simulator_records_it():
 
 
 def test_random_batch_stays_inside():
-    """Invariance over 1000 random robots (state, operator gain, target and deflection) against the adversarial wall for 1 s."""
+    """Invariance over 1000 random robots (state, operator gain, target and deflection) against the adversarial
+    wall for 1 s."""
     loop, _, _ = _scenario("adversarial_wall").closed_loop("ce")
     rng = np.random.default_rng(7)
     N = 1000
     q0 = np.column_stack([rng.uniform(-0.8, 0.8, N), rng.uniform(0.8, 3.7, N), rng.uniform(-1.0, 1.0, N)])
     v0 = rng.uniform(-0.8, 0.8, (N, 3))
     targets = np.column_stack([rng.uniform(-2.0, 2.0, N), rng.uniform(4.2, 6.0, N), rng.uniform(-2.0, 2.0, N)])
-    humans = [AdversarialOperator(LineTrajectory(t, np.zeros(3)), np.full(3, rng.uniform(10.0, 40.0)), t, rng.uniform(0.3, 1.5))
+    humans = [AdversarialOperator(LineTrajectory(t, np.zeros(3)), np.full(3, rng.uniform(10.0, 40.0)), t,
+                                  rng.uniform(0.3, 1.5))
               for t in targets]
     problem = BatchProblem.replicate(loop, q0, v0, operators_from_models(humans, 3))
     result = simulate_batch(problem, 1.0, DT)

@@ -94,8 +94,8 @@ def test_arm_lyapunov_function_never_increases():
     arm = PlanarArm()
     feasible = FeasibleSet.from_regions([Polytope.from_rows([[1, 0], [0, -1]], [-1.2, -0.3])])
     wish = line([0.3, 0.8], [0.2, -0.15])
-    loop = ClosedLoop(arm, feasible, ScriptedOperator(wish, np.full(2, 5.0), np.full(2, 2.0)), make_controller("ce", model=arm),
-                      SharingParameters(mode=Mode.MACHINE), ReferenceShape())
+    loop = ClosedLoop(arm, feasible, ScriptedOperator(wish, np.full(2, 5.0), np.full(2, 2.0)),
+                      make_controller("ce", model=arm), SharingParameters(mode=Mode.MACHINE), ReferenceShape())
     trace = simulate(loop, np.array([0.3, 0.8]), np.zeros(2), 6.0, 1e-3)
     assert trace.finite and trace.inside.all()
     L, _ = lyapunov_along(loop, trace, loop.controller.tracking)

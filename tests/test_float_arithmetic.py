@@ -81,6 +81,7 @@ def test_the_non_certainty_equivalent_law_on_floats_is_paper_13_14(case):
     g = law.gamma_n
     out = law.evaluate(model, group, c, q, v, theta_hat, np.concatenate([p_n, W_n.ravel()]))
     np.testing.assert_allclose(out.u, -W @ (theta_hat + g * W_n.T @ p_n) - g * W_n @ (W_n.T @ s), rtol=1e-12)
-    np.testing.assert_allclose(out.theta_dot, g * (law.alpha_n * W_n - W).T @ p_n + g * law.k_q * W_n.T @ p_n, rtol=1e-12)
-    np.testing.assert_allclose(out.state_dot, np.concatenate([-law.alpha_n * p_n + p, (-law.alpha_n * W_n + W).ravel()]),
+    np.testing.assert_allclose(out.theta_dot, g * (law.alpha_n * W_n - W).T @ p_n + g * law.k_q * W_n.T @ p_n,
                                rtol=1e-12)
+    np.testing.assert_allclose(out.state_dot,
+                               np.concatenate([-law.alpha_n * p_n + p, (-law.alpha_n * W_n + W).ravel()]), rtol=1e-12)

@@ -43,10 +43,10 @@ import pytest
 from hypothesis import given, settings
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-import strategies as S  # noqa: E402
+import strategies as S
 
-from sharedctl.sets import SetClass, classify  # noqa: E402
-from sharedctl.sharing import Mode, SharingParameters  # noqa: E402
+from sharedctl.sets import SetClass, classify
+from sharedctl.sharing import Mode, SharingParameters
 
 SIM = S.SIM_SETTINGS
 

@@ -3,7 +3,7 @@ import math
 
 import numpy as np
 import pytest
-from hypothesis import given, settings
+from hypothesis import given
 from hypothesis import strategies as st
 
 from sharedctl.models import OmniRobot, PlanarArm
@@ -24,7 +24,8 @@ def arm_closed_form(p, q, v):
     h = -m2 * l1 * lc2 * s2
     C = np.array([[h * v[1], h * (v[0] + v[1])], [-h * v[0], 0.0]])
     g = np.array(
-        [(m1 * lc1 + m2 * l1) * g0 * math.cos(q[0]) + m2 * lc2 * g0 * math.cos(q[0] + q[1]), m2 * lc2 * g0 * math.cos(q[0] + q[1])]
+        [(m1 * lc1 + m2 * l1) * g0 * math.cos(q[0]) + m2 * lc2 * g0 * math.cos(q[0] + q[1]),
+         m2 * lc2 * g0 * math.cos(q[0] + q[1])]
     )
     return M, C, g
 

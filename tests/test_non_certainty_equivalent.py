@@ -10,7 +10,6 @@ from sharedctl.controllers import NonCertaintyEquivalentLaw
 from sharedctl.human import FunctionTrajectory
 from sharedctl.models import OmniRobot
 from sharedctl.reference import ReferenceShape
-from sharedctl.sharing import Mode
 from sharedctl.simulator import MachineController, make_controller, simulate
 from sharedctl.transform import coordinates
 
@@ -50,7 +49,8 @@ def test_filtered_identities_of_the_proof_hold_along_solutions():
         u_n = x[-n:]
         c = coordinates(group, q, v, wish.sample(t), shape)
         out = law.evaluate(model, group, c, q, v, th, s)
-        return np.concatenate([v, model.acceleration(q, v, out.u), out.theta_dot, out.state_dot, -law.alpha_n * u_n + out.u]), out
+        rates = [v, model.acceleration(q, v, out.u), out.theta_dot, out.state_dot, -law.alpha_n * u_n + out.u]
+        return np.concatenate(rates), out
 
     dt, worst_filter, worst_u = 5e-4, 0.0, 0.0
     for step in range(6000):

@@ -51,12 +51,15 @@ def test_observer_alone_recovers_a_known_velocity():
     obs = VelocityObserver()
     dt, x = 1e-4, obs.initial_state(np.zeros(3))
     errs = []
+
+    def tq(tt):
+        return np.array([np.sin(tt), 0.5 * np.cos(2 * tt), 0.2 * tt])
+
     for k in range(40000):
         t = k * dt
         q = np.array([np.sin(t), 0.5 * np.cos(2 * t), 0.2 * t])
         v = np.array([np.cos(t), -np.sin(2 * t), 0.2])
         errs.append(np.linalg.norm(obs.velocity(q, x) - v))
-        tq = lambda tt: np.array([np.sin(tt), 0.5 * np.cos(2 * tt), 0.2 * tt])
         k1 = obs.derivative(q, x)
         k2 = obs.derivative(tq(t + dt / 2), x + dt / 2 * k1)
         k3 = obs.derivative(tq(t + dt / 2), x + dt / 2 * k2)

@@ -42,7 +42,8 @@ def replay(run, recorded):
     for k in range(run["samples"]):
         t, q, v = k * PERIOD, recorded["q"][k], recorded["v"][k]
         cmd = loop.human.command(t, q, v)
-        state, out = ctrl.step(state, q, v if feedback else None, OperatorInput(loop.human.desired(t), cmd.force, cmd.intent), PERIOD)
+        operator = OperatorInput(loop.human.desired(t), cmd.force, cmd.intent)
+        state, out = ctrl.step(state, q, v if feedback else None, operator, PERIOD)
         got["u_s"].append(out.u_s)
         got["u_f"].append(out.u_f)
         got["theta_hat"].append(out.theta_estimate)
@@ -71,4 +72,5 @@ def test_step_reproduces_the_recorded_outputs(run, recorded):
     for signal in CONTINUOUS:
         want = recorded[signal]
         scale = np.nanmax(np.abs(want)) if np.any(np.isfinite(want)) else 1.0
-        np.testing.assert_allclose(got[signal], want, rtol=RTOL, atol=RTOL * max(scale, 1e-300), equal_nan=True, err_msg=signal)
+        np.testing.assert_allclose(got[signal], want, rtol=RTOL, atol=RTOL * max(scale, 1e-300), equal_nan=True,
+                                   err_msg=signal)

@@ -26,10 +26,10 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-import strategies as S  # noqa: E402
+import strategies as S
 
-from sharedctl.sets import SetClass  # noqa: E402
-from sharedctl.sharing import Authority, SharingParameters  # noqa: E402
+from sharedctl.sets import SetClass
+from sharedctl.sharing import Authority, SharingParameters
 
 HUMAN, SHARED, MACHINE = int(Authority.HUMAN), int(Authority.SHARED), int(Authority.MACHINE)
 SAFE, HAZARD = int(SetClass.SAFE), int(SetClass.HAZARD)

@@ -165,7 +165,7 @@ class ConsoleApp:
         tel = self.telemetry
         now = time.monotonic()
         with tel.lock:
-            state, arrival, first = tel.state, tel.state_arrival, tel.first_arrival
+            state, arrival = tel.state, tel.state_arrival
             view = DashboardView(
                 title=f"sharedctl console · {self.options.robot_id} · {self.options.scenario.name}",
                 mode="script" if self.script else "keyboard", state=state,

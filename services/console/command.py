@@ -15,10 +15,13 @@ from ..zenoh_session import DEFAULT_ENDPOINT, EndpointError
 
 
 def add_parser(subparsers) -> None:
-    p = subparsers.add_parser("console", help="operator console: live dashboard, keyboard joystick or scripted operator")
+    p = subparsers.add_parser("console",
+                              help="operator console: live dashboard, keyboard joystick or scripted operator")
     which = p.add_mutually_exclusive_group()
-    which.add_argument("--script", metavar="SCENARIO", help="the scenario's scripted operator drives (file or packaged name)")
-    which.add_argument("--scenario", metavar="FILE", help="scenario for the map and initial pose in keyboard mode (default paper_convex)")
+    which.add_argument("--script", metavar="SCENARIO",
+                       help="the scenario's scripted operator drives (file or packaged name)")
+    which.add_argument("--scenario", metavar="FILE",
+                       help="scenario for the map and initial pose in keyboard mode (default paper_convex)")
     p.add_argument("--headless", action="store_true", help="no dashboard, no keyboard; print one line at the end")
     p.add_argument("--duration", type=float, metavar="S", help="stop after S seconds (default: until SIGINT/SIGTERM)")
     link = p.add_mutually_exclusive_group()

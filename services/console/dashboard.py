@@ -116,7 +116,8 @@ def link_panel(view: DashboardView) -> Panel:
         table.add_row("staleness", Text(f"{link.staleness_ms:.0f} ms", style="red" if link.staleness_ms > 300 else ""))
         table.add_row("CAN feedback age", Text(f"{link.can_feedback_age_ms:.1f} ms",
                                                style="red" if link.can_feedback_age_ms > 50 else ""))
-        table.add_row("rejected msgs", Text(str(link.rejected_messages), style="yellow" if link.rejected_messages else ""))
+        table.add_row("rejected msgs",
+                      Text(str(link.rejected_messages), style="yellow" if link.rejected_messages else ""))
     return Panel(table, title="link")
 
 
@@ -148,7 +149,8 @@ def operator_panel(view: DashboardView) -> Panel:
     table.add_column()
     table.add_row("mode", view.mode + (f"  t = {view.script_time:.1f} s" if view.script_time is not None else ""))
     if view.control:
-        table.add_row("control", Text(view.control, style="green" if view.control.startswith("held by this") else "yellow"))
+        table.add_row("control",
+                      Text(view.control, style="green" if view.control.startswith("held by this") else "yellow"))
     if cmd is None:
         table.add_row("sent", Text("nothing yet", style="grey50"))
     else:
@@ -202,7 +204,8 @@ def render(view: DashboardView) -> Layout:
     layout["body"].split_row(Layout(name="left", size=map_width, ratio=3), Layout(name="right", ratio=2))
     layout["left"].split_column(Layout(map_panel(view), name="map", size=map_height), Layout(name="lower"))
     layout["lower"].split_row(Layout(authority_panel(view.state)), Layout(link_panel(view)))
-    layout["right"].split_column(Layout(estimates_panel(view.state, view.time_origin), size=13), Layout(operator_panel(view)))
+    layout["right"].split_column(Layout(estimates_panel(view.state, view.time_origin), size=13),
+                                 Layout(operator_panel(view)))
     layout["events"].update(events_panel(view.events, view.time_origin))
     return layout
 

@@ -56,7 +56,8 @@ class ScriptedCommandSource:
     human: HumanModel
     counter: CommandCounter = field(default_factory=CommandCounter)
 
-    def command(self, t: float, state: RobotState, *, estop: bool = False, send_time: float | None = None) -> OperatorCommand:
+    def command(self, t: float, state: RobotState, *,
+                estop: bool = False, send_time: float | None = None) -> OperatorCommand:
         """The command at elapsed time t (s since the script started) for the latest telemetry."""
         q = np.asarray(state.q, float)
         v = np.asarray(state.qd_hat, float)

@@ -10,14 +10,16 @@
 * Commands: Set_Input_Torque per axis, Estop to all axes, IDLE to all axes.
 * Receive path: the frames this side sends (Set_*, Estop, Clear_Errors, RTR polls) come back
   on udp_multicast and are ignored; a frame the codec refuses is counted and skipped.
-* Frames go through a port (services/can_ports.py): on udp_multicast it reads and writes the
-  bus's socket directly, python-can's datagrams without python-can's per-frame `Message`.
+* Frames go through a transport (services/can_transport/): on udp_multicast a socket of its own
+  speaking python-can's datagrams, without python-can's per-frame `Message`; a python-can bus
+  given here (or a stand-in with its `send`/`recv`) is wrapped in the generic transport.
 
-Frames are built and read with `sharedctl.protocol.cansimple`, except on the two paths that run
-every period (frame_layout.py): Set_Input_Torque is packed, and Get_Encoder_Estimates and the
-Set_Input_Torque echoes are read, straight from the codec's frame layout, by the arbitration id
-first. They accept and refuse exactly what the codec does (a frame they do not accept goes on to
-the codec, which counts it as bad); tests/services/test_controller_frame_layout.py holds them to it.
+Frames are built and read with `sharedctl.protocol.cansimple`; the two paths that run every
+period use its per-period entry points, on the same compiled codecs: `torque_frame` packs
+Set_Input_Torque, and `periodic_kind` picks out Get_Encoder_Estimates (read with
+`encoder_estimates`) and the Set_Input_Torque echoes by the arbitration id first. They accept
+exactly what `decode` accepts of those kinds; every other frame goes on to `decode`, which
+decodes it or counts it as bad (tests/protocol/test_periodic_frames.py holds them to it).
 """
 from __future__ import annotations
 
@@ -33,8 +35,7 @@ from sharedctl.protocol.canframe import DEFAULT_WHEEL_NODES
 from sharedctl.protocol.errors import ProtocolError
 from sharedctl.protocol.odrive_enums import AxisState, ControlMode, InputMode, ODriveError
 
-from ..can_ports import port_for
-from . import frame_layout
+from ..can_transport import transport_for
 from .encoder_check import EncoderCheck
 from .odometry import AxisEstimate
 
@@ -70,7 +71,7 @@ class CanEvent:
 
 @dataclass
 class CanMaster:
-    bus: object                                  # can.BusABC (send, recv)
+    bus: object                                  # a Transport, or a python-can bus (send, recv)
     nodes: tuple[int, ...] = DEFAULT_WHEEL_NODES
     arm_timeout: float = 0.5                     # s to see CLOSED_LOOP heartbeats before retrying
     clock: object = time.monotonic
@@ -86,17 +87,16 @@ class CanMaster:
     arm_attempts: int = 0
     arm_requested_at: float | None = None
     events: list = field(default_factory=list)
-    fast_paths: bool = True                      # the per-period frames by their layout (frame_layout.py)
+    fast_paths: bool = True                      # the per-period frames through cansimple's entry points
 
     def __post_init__(self) -> None:
         self.axes = {n: AxisStatus(n) for n in self.nodes}
-        self.port = port_for(self.bus)
-        self._torque_ids = {n: frame_layout.torque_id(n) for n in self.nodes}
+        self.transport = transport_for(self.bus)
         self._node_ids = frozenset(self.nodes)
 
     def use_bus(self, bus) -> None:
         """Read and write another bus from now on."""
-        self.bus, self.port = bus, port_for(bus)
+        self.bus, self.transport = bus, transport_for(bus)
 
     # ------------------------------------------------------------------ send
     def send(self, message) -> bool:
@@ -105,7 +105,7 @@ class CanMaster:
 
     def _send_frame(self, arbitration_id: int, data: bytes, remote: bool = False, dlc: int | None = None) -> bool:
         try:
-            self.port.send(arbitration_id, remote, len(data) if dlc is None else dlc, data, timeout=0.01)
+            self.transport.send(arbitration_id, remote, len(data) if dlc is None else dlc, data, timeout=0.01)
         except (can.CanError, OSError) as exc:
             self.tx_errors[type(exc).__name__] += 1
             return False
@@ -132,7 +132,8 @@ class CanMaster:
         if now - self.arm_requested_at > self.arm_timeout:
             missing = [n for n, a in self.axes.items() if not self._armed(a)]
             self.events.append(CanEvent(
-                "fault", "warning", f"arming attempt {self.arm_attempts}: axes {missing} not in CLOSED_LOOP_CONTROL; retrying",
+                "fault", "warning",
+                f"arming attempt {self.arm_attempts}: axes {missing} not in CLOSED_LOOP_CONTROL; retrying",
             ))
             self.request_arming()
         return False
@@ -154,7 +155,7 @@ class CanMaster:
                 self.send(cs.SetInputTorque(n, float(tau)))
             return
         for n, tau in zip(self.nodes, torques):
-            self._send_frame(self._torque_ids[n], frame_layout.torque_data(float(tau)))
+            self._send_frame(*cs.torque_frame(n, float(tau)))
 
     def estop_all(self) -> None:
         for n in self.nodes:
@@ -172,7 +173,7 @@ class CanMaster:
         while count < max_frames:
             remaining = deadline - self.clock()
             try:
-                frame = self.port.recv(max(remaining, 0.0))
+                frame = self.transport.recv(max(remaining, 0.0))
             except (can.CanError, OSError, ValueError) as exc:
                 self.bad_frames[type(exc).__name__] += 1
                 frame = None
@@ -201,13 +202,13 @@ class CanMaster:
     def _handle(self, arbitration_id: int, remote: bool, extended: bool, dlc: int, data: bytes, now: float) -> None:
         """One received frame: decode, ignore our own direction, update the axes."""
         self.rx_frames += 1
-        if self.fast_paths and extended is False and remote is False:
-            kind = frame_layout.classify(arbitration_id, dlc, data, self._node_ids)
-            if kind is frame_layout.ECHO:
+        if self.fast_paths:
+            kind = cs.periodic_kind(arbitration_id, dlc, data, remote, extended, self._node_ids)
+            if kind is cs.SetInputTorque:
                 self.echoes_ignored += 1
                 return
-            if kind is frame_layout.ENCODER:
-                pos, vel = frame_layout.encoder_values(data)
+            if kind is cs.GetEncoderEstimates:
+                pos, vel = cs.encoder_estimates(data)
                 self._encoder(self.axes[arbitration_id >> 5], pos, vel, now)
                 return
         try:
@@ -243,7 +244,8 @@ class CanMaster:
             if error == ODriveError.NONE:
                 self.events.append(CanEvent("fault_cleared", "info", f"axis {axis.node_id}: errors cleared"))
             elif new_bits & ODriveError.WATCHDOG_TIMER_EXPIRED:
-                self.events.append(CanEvent("watchdog_trip", "error", f"axis {axis.node_id}: watchdog expired ({_names(error)})"))
+                self.events.append(CanEvent("watchdog_trip", "error",
+                                            f"axis {axis.node_id}: watchdog expired ({_names(error)})"))
             elif new_bits:
                 self.events.append(CanEvent("fault", "error", f"axis {axis.node_id}: {_names(error)}"))
         axis.error = error

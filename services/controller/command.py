@@ -8,7 +8,10 @@
                          [--[no-]sensor-sync] [--sensor-lead-us 250] [--sensor-wait-us T/4] [--spin-us 100]
                          [--torque-at-us 0] [--cpu N]
                          [--lease implicit|explicit] [--lease-expiry-ms 1000] [--max-command-age-ms 500]
-                         [--max-clock-skew-ms MS]
+                         [--max-clock-skew-ms MS] [--json OUT]
+
+At exit it prints a summary line for people and, with `--json OUT`, writes the loop statistics'
+summary as JSON (loop_stats.py: units in the key names) — what another module reads.
 """
 from __future__ import annotations
 
@@ -25,7 +28,10 @@ from ..security import zenoh_config
 from ..lifecycle import StopFlag
 from ..service_config import add_argument as add_service_config_argument
 from ..scenario_files import load
-from .daemon import ControllerDaemon, DaemonConfig
+from ..summary_output import write_json
+from .daemon import ControllerDaemon
+from .daemon_config import DaemonConfig
+from . import loop_stats
 from .priority import LEVELS, keep_off_cpu, make_loop_realtime, pin_to_cpu, raise_nice
 from ..recording.launch import add_argument as add_record_argument, open_process_recording, summary_line
 
@@ -34,7 +40,8 @@ PROG = "sharedctl controller"
 
 def add_parser(subparsers) -> None:
     p = subparsers.add_parser("controller", help="run the controller/arbiter daemon (CAN master + shared controller)")
-    p.add_argument("--scenario", default="paper_convex", help="scenario TOML file or packaged name (default: paper_convex)")
+    p.add_argument("--scenario", default="paper_convex",
+                   help="scenario TOML file or packaged name (default: paper_convex)")
     p.add_argument("--controller", choices=("ce", "nce", "of"), help="machine law (default: the scenario's, else ce)")
     can_bus.add_arguments(p)
     add_record_argument(p)
@@ -49,7 +56,8 @@ def add_parser(subparsers) -> None:
     p.add_argument("--rate", type=float, default=500.0, help="control loop rate, Hz (default 500)")
     p.add_argument("--telemetry-rate", type=float, default=50.0, help="RobotState rate, Hz (default 50)")
     p.add_argument("--torque-limit", type=float, default=60.0, help="wheel torque limit, N·m (default 60)")
-    p.add_argument("--feedback-timeout-ms", type=float, default=50.0, help="CAN feedback age that triggers Estop (default 50)")
+    p.add_argument("--feedback-timeout-ms", type=float, default=50.0,
+                   help="CAN feedback age that triggers Estop (default 50)")
     p.add_argument("--duration", type=float, help="stop after this many seconds (default: run until SIGINT/SIGTERM)")
     p.add_argument("--priority", choices=LEVELS, default="realtime",
                    help="scheduling: realtime = nice -10 and SCHED_FIFO 20 for the loop thread (default; falls back "
@@ -79,12 +87,17 @@ def add_parser(subparsers) -> None:
                    help="operator authority lease: implicit = a command while nobody holds control takes it "
                         "(default); explicit = only a take on the lease queryable (or in-band) grants control")
     p.add_argument("--lease-expiry-ms", type=float, default=1000.0,
-                   help="the lease is free again after this long without a command or take from its holder (default 1000)")
+                   help="the lease is free again after this long without a command or take from its holder "
+                        "(default 1000)")
     p.add_argument("--max-command-age-ms", type=float, default=500.0,
-                   help="drop operator messages arriving this much later than the session's best delivery (default 500)")
+                   help="drop operator messages arriving this much later than the session's best delivery "
+                        "(default 500)")
     p.add_argument("--max-clock-skew-ms", type=float,
                    help="drop operator messages whose |receive wall time - send_time| exceeds this (only for hosts "
                         "synchronised by chrony/PTP; default: no absolute bound)")
+    p.add_argument("--json", metavar="OUT",
+                   help="at exit, write the summary (ticks, missed deadlines, jitter, compute and CPU per period, CAN "
+                        "frames, operator commands, …; loop_stats.py) as JSON to OUT")
     add_service_config_argument(p)
     p.set_defaults(handler=run)
 
@@ -131,7 +144,7 @@ def run(args) -> int:
     if args.cpu is not None:
         priority += f", loop on CPU {args.cpu}, {keep_off_cpu(args.cpu)}"   # likewise inherited
     try:
-        bus = can_bus.open_bus(spec)
+        bus = can_bus.open_transport(spec)
         session = zenoh_config.open_configured(args.zenoh_config, listen, connect)
         recording = open_process_recording(args.record, "controller", robot_id, args.scenario, scenario.name,
                                            session, spec)   # --record DIR: docs/recording.md
@@ -148,14 +161,16 @@ def run(args) -> int:
             flush=True,
         )
         summary = daemon.run(stop)
-        print(summary.line(), flush=True)
+        print(loop_stats.summary_line(summary), flush=True)
+        if args.json:
+            write_json(args.json, summary)
         return 0
     except Exception as exc:  # noqa: BLE001 — report, clean up, non-zero exit
         print(f"{PROG}: {type(exc).__name__}: {exc}", file=sys.stderr)
         return 1
     finally:
         if daemon is not None:
-            daemon.undeclare()
+            daemon.links.undeclare()
         if recording is not None:
             print(summary_line(recording.close()), flush=True)
         if session is not None:

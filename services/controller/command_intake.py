@@ -53,7 +53,7 @@ class CommandIntake:
         the policy refuses and counts it)."""
         try:
             payload = sample.payload.to_bytes()
-        except Exception:  # noqa: BLE001
+        except Exception:  # noqa: BLE001 — an unreadable payload is queued as empty bytes, never raised in the loop
             payload = b""
         if len(self.pending) >= MAX_PENDING:
             self.overflowed += 1

@@ -10,10 +10,10 @@ robot does not have.
 
 Pure: estimates and their arrival times in, the estimate to use and the reason for any
 rejection out. The two values of one `Get_Encoder_Estimates` frame check each other and the
-previous frame of the same wheel. The drives sample on a `period` tick (1 ms) and send every other tick; how many ticks lie
-between two received frames is not known (frames get lost, a delayed link releases several at
-once, arrival times say little about sampling times), so the check asks whether *some* whole
-number of periods k = 1 … `max_periods` explains the frame:
+previous frame of the same wheel. The drives sample on a `period` tick (1 ms) and send every
+other tick; how many ticks lie between two received frames is not known (frames get lost, a
+delayed link releases several at once, arrival times say little about sampling times), so the
+check asks whether *some* whole number of periods k = 1 … `max_periods` explains the frame:
 
 * position: |Δp − ½(v_prev + v)·k·period| ≤ `pos_slack` + `speed_slack`·|v| + ½|v − v_prev|·k·period
   for some k (the increment agrees with the measured speeds over whole sampling ticks; the last

@@ -89,7 +89,8 @@ class OperatorLease:
 
     def holds(self, operator_id: str, session_id: str, now: float) -> bool:
         self.update(now)
-        return self.holder is not None and (self.holder.operator_id, self.holder.session_id) == (operator_id, session_id)
+        return (self.holder is not None
+                and (self.holder.operator_id, self.holder.session_id) == (operator_id, session_id))
 
     @property
     def holder_id(self) -> str | None:
@@ -124,7 +125,8 @@ class OperatorLease:
             self._released.popitem(last=False)
         return LeaseDecision(True, None, "released")
 
-    def admit_command(self, operator_id: str, session_id: str, control_request: ControlRequest, now: float) -> str | None:
+    def admit_command(self, operator_id: str, session_id: str, control_request: ControlRequest,
+                      now: float) -> str | None:
         """None if a command of this session may drive (the lease is renewed), else why not.
 
         Reasons: `not_holder` (another session holds the lease), `no_lease` (nobody holds it and

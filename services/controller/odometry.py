@@ -4,14 +4,13 @@ Pure: encoder estimates and their reception times in, (q, q̇) out; no clock, no
 
 The encoders report wheel position (turns) and speed (turns/s), positive in the direction
 of positive ω_j (docs/services.md, "Units"). With ω = 2π·vel (rad/s) the body velocity is
-q̇ = B(ψ)⁻ᵀ ω (`OmniRobot.body_velocity_from_wheels`, here in closed form:
-wheel_kinematics.py). The pose is integrated from the
-scenario's initial q with the wheel *angle increments* Δφ = 2π·Δpos between two updates,
-Δq = B(ψ_mid)⁻ᵀ Δφ at the mid-step yaw. That is the trapezoidal rule for q̇ = B(ψ)⁻ᵀ φ̇
-without needing a time base: a late or jittered update loses no distance, and the
-controller's clock and the drive's clock never have to agree. (`source="velocity"`
-integrates q̇ with the trapezoidal rule over the measured time step instead, for drives
-that report no position.)
+q̇ = B(ψ)⁻ᵀ ω (the model's `WheelMap.body_velocity`, in closed form on Python floats).
+The pose is integrated from the scenario's initial q with the wheel *angle increments*
+Δφ = 2π·Δpos between two updates, Δq = B(ψ_mid)⁻ᵀ Δφ at the mid-step yaw. That is the
+trapezoidal rule for q̇ = B(ψ)⁻ᵀ φ̇ without needing a time base: a late or jittered update
+loses no distance, and the controller's clock and the drive's clock never have to agree.
+(`source="velocity"` integrates q̇ with the trapezoidal rule over the measured time step
+instead, for drives that report no position.)
 """
 from __future__ import annotations
 
@@ -20,7 +19,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .wheel_kinematics import WheelKinematics
+from sharedctl.models.omni_robot import OmniRobot, WheelMap
 
 TWO_PI = 2.0 * math.pi
 
@@ -43,7 +42,7 @@ class WheelOdometry:
     reported; until then it stays at the initial q.
     """
 
-    model: object                      # OmniRobot: input_matrix, body_velocity_from_wheels
+    model: OmniRobot
     q0: np.ndarray
     source: str = "position"           # "position" (angle increments) or "velocity" (trapezoid on q̇)
     max_step_turns: float = 2.0        # a larger wheel increment between updates is a discontinuity (drive reset)
@@ -51,7 +50,7 @@ class WheelOdometry:
     q: np.ndarray = field(init=False)
     v: np.ndarray = field(init=False)
     updates: int = field(init=False, default=0)
-    kinematics: object = field(init=False, repr=False)   # WheelKinematics (closed form) or the model's solves
+    wheel_map: WheelMap = field(init=False, repr=False)   # the model's B(ψ) in closed form
     _last_pos: list | None = field(init=False, default=None)
     _last_time: float | None = field(init=False, default=None)
 
@@ -60,7 +59,7 @@ class WheelOdometry:
             raise ValueError(f"odometry source must be 'position' or 'velocity', got {self.source!r}")
         self.q = np.asarray(self.q0, dtype=float).copy()
         self.v = np.zeros_like(self.q)
-        self.kinematics = WheelKinematics.for_model(self.model)
+        self.wheel_map = self.model.wheel_map
 
     def wheel_speeds(self, estimates) -> np.ndarray:
         """ω (rad/s) = 2π · vel (turns/s)."""
@@ -69,7 +68,7 @@ class WheelOdometry:
     def update(self, estimates) -> tuple[np.ndarray, np.ndarray]:
         """Advance with the latest estimates; returns (q, q̇) (copies).
 
-        Works on Python floats (three components; `WheelKinematics`): at 500 Hz a handful of
+        Works on Python floats (three components; `WheelMap`): at 500 Hz a handful of
         numpy calls on 3-vectors cost more than the arithmetic."""
         if any(e is None for e in estimates):
             return self.q.copy(), self.v.copy()
@@ -77,7 +76,7 @@ class WheelOdometry:
         newest = max(e.received for e in estimates)
         omega = [TWO_PI * e.vel_turns_s for e in estimates]
         q = self.q.tolist()
-        v_new = self.kinematics.body_velocity(q, omega)
+        v_new = self.wheel_map.body_velocity(q, omega)
         last = self._last_pos
         if last is not None and any(abs(p - p0) > self.max_step_turns for p, p0 in zip(pos, last)):
             self.discontinuities += 1       # e.g. a drive restarted from 0 turns: re-baseline, keep the pose
@@ -88,7 +87,7 @@ class WheelOdometry:
             else:
                 dt = max(newest - self._last_time, 0.0)
                 q = [qi + 0.5 * dt * (vi + wi) for qi, vi, wi in zip(q, self.v.tolist(), v_new)]
-            v_new = self.kinematics.body_velocity(q, omega)
+            v_new = self.wheel_map.body_velocity(q, omega)
             self.q = np.array(q)
         self._last_pos, self._last_time = pos, newest
         self.v = np.array(v_new)
@@ -97,9 +96,9 @@ class WheelOdometry:
 
     def _integrate_angles(self, q: list, d_phi: list) -> list:
         """Δq = B(ψ_mid)⁻ᵀ Δφ: one predictor pass for the yaw, then the midpoint."""
-        dq = self.kinematics.body_velocity(q, d_phi)
+        dq = self.wheel_map.body_velocity(q, d_phi)
         mid = [qi + 0.5 * di for qi, di in zip(q, dq)]
-        dq = self.kinematics.body_velocity(mid, d_phi)
+        dq = self.wheel_map.body_velocity(mid, d_phi)
         return [qi + di for qi, di in zip(q, dq)]
 
 

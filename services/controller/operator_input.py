@@ -3,7 +3,7 @@
 Pure: payload bytes and reception times in, `OperatorInput` out; the caller supplies the clock.
 
 * The joystick spring (44): u_h = k_p ∘ d with d the normalised deflection in [−1, 1];
-  the intent (45): v_h = ½ Σ_j k_p,j d_j².
+  the intent (45): v_h = ½ Σ_j k_p,j d_j² (`sharedctl.human.intent`).
 * The wish: q_d, q̇_d, q̈_d as sent (`sharedctl.transform.Desired`).
 * Ordering and age (`replay_guard.py`): per session, only a seq newer than the newest accepted
   one is taken (duplicates and older seqs are dropped and counted), and a command arriving more
@@ -34,6 +34,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from sharedctl.human import intent
 from sharedctl.protocol.errors import ProtocolError
 from sharedctl.protocol.messages import ControlRequest, OperatorCommand
 from sharedctl.protocol.msgpack_codec import decode_message
@@ -171,11 +172,9 @@ class OperatorInputPolicy:
         if status.hands_off:
             built = OperatorInput(Desired(q_d, zero, zero.copy()), zero.copy(), 0.0)
         else:
-            deflection = np.asarray(cmd.joystick, dtype=float)
-            force = self.kp * deflection                                   # (44)
-            intent = 0.5 * float(np.sum(self.kp * deflection * deflection))  # (45)
+            force = self.kp * np.asarray(cmd.joystick, dtype=float)                   # (44)
             built = OperatorInput(Desired(q_d, np.asarray(cmd.qd_d, dtype=float), np.asarray(cmd.qdd_d, dtype=float)),
-                                  force, intent)
+                                  force, intent(self.kp.tolist(), cmd.joystick))       # (45)
         for array in (built.desired.q, built.desired.q_dot, built.desired.q_ddot, built.force):
             array.flags.writeable = False       # handed out again every period until the next command
         self._input_of, self._input = (cmd, status.hands_off), built

@@ -18,7 +18,8 @@ from dataclasses import dataclass
 @dataclass
 class SensorPhaseLock:
     period: float                # s, the control period
-    lead: float = 2.5e-4         # s after the estimates' arrival at which a tick should start (above the drives' send jitter)
+    # s after the estimates' arrival at which a tick should start (above the drives' send jitter)
+    lead: float = 2.5e-4
     gain: float = 0.2            # fraction of the phase error removed per tick
     max_step: float = 5e-5       # s, largest correction per tick
 

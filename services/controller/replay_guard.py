@@ -58,7 +58,8 @@ class ReplayGuard:
         if self.max_skew is not None and not self.max_skew > 0:
             raise ValueError("max_skew must be positive (or None: no absolute bound)")
 
-    def admit(self, session_id: str, seq: int, send_time: float, now: float, wall_now: float | None = None) -> str | None:
+    def admit(self, session_id: str, seq: int, send_time: float, now: float,
+              wall_now: float | None = None) -> str | None:
         """Judge one message received at `now` (s, monotonic) and `wall_now` (s, wall clock, or None)."""
         track = self._sessions.get(session_id)
         if track is not None and seq <= track.newest_seq:

@@ -11,7 +11,8 @@ would coast on), and prints a summary: violations, min_margin and final_speed fr
 GroundTruth; tracking and authority (the names of `sharedctl sim --json`) from RobotState;
 and the in-process sampled simulation of the same scenario (`reference`) with the deviation
 between the two. Exit 0 only if nothing was violated, no emergency stop cut the run short, and
-every child exited cleanly.
+every child exited cleanly. Robot and controller write their exit summaries as JSON in the log
+directory (`--json`); the demo's own JSON holds them, under `processes.<name>.summary`.
 
 Wiring (Zenoh peers do not forward between peers they connect, so the operator console
 connects to the controller, whose telemetry it needs):
@@ -36,14 +37,15 @@ from pathlib import Path
 from sharedctl.protocol import keys
 from sharedctl.scenario import ScenarioError
 
-from sharedctl.services.children import Child, free_udp_port, raise_priority, start_child, udp_receive_buffer_errors, wait_listening
+from sharedctl.services.children import (Child, free_udp_port, raise_priority, start_child, udp_receive_buffer_errors,
+                                         wait_listening)
 from sharedctl.services.faults.stack import FaultStack, add_arguments as add_fault_arguments
 from sharedctl.services.security.secure_stack import SecureStack, add_arguments as add_secure_arguments
 from sharedctl.services.recording.launch import add_argument as add_record_argument, open_demo_recording
 from .measure import TOLERANCE, Recorder, deviation, measure, plant_reference_run, reference_run
 from sharedctl.services.lifecycle import StopFlag
 from sharedctl.services.scenario_files import load
-from sharedctl.services.summary_output import emit
+from sharedctl.services.summary_output import emit, read_json
 from sharedctl.services.zenoh_session import EndpointError, check_loopback, free_loopback_port, open_session
 
 STARTUP_TIMEOUT = 30.0    # s until the operator is in control
@@ -53,7 +55,8 @@ SETTLE_TIMEOUT = 3.0      # s the controller gets to bring the robot to rest onc
 
 def add_parser(subparsers) -> None:
     p = subparsers.add_parser("demo", help="run robot, controller and scripted operator together and measure the run")
-    p.add_argument("--scenario", default="paper_convex", help="scenario TOML file or packaged name (default paper_convex)")
+    p.add_argument("--scenario", default="paper_convex",
+                   help="scenario TOML file or packaged name (default paper_convex)")
     p.add_argument("--controller", choices=("ce", "nce", "of"), help="machine law (default: the scenario's, else ce)")
     p.add_argument("--duration", type=float, metavar="S", help="run length (default: the scenario's duration)")
     p.add_argument("--headless", action="store_true", help="no live dashboard even with a terminal")
@@ -62,9 +65,11 @@ def add_parser(subparsers) -> None:
                    help="the controller's endpoint, with --secure the router's (default: a free loopback port)")
     p.add_argument("--robot-id", default="robot1", help="robot id in the key expressions (default robot1)")
     p.add_argument("--feedback-timeout-ms", type=float, metavar="MS",
-                   help="passed to the controller: CAN feedback age that triggers Estop (default: the controller's, 50)")
+                   help="passed to the controller: CAN feedback age that triggers Estop "
+                        "(default: the controller's, 50)")
     p.add_argument("--no-reference", action="store_true", help="skip the in-process sampled reference run")
-    p.add_argument("--log-dir", metavar="DIR", help="keep the children's output here (default: a temporary directory, removed on success)")
+    p.add_argument("--log-dir", metavar="DIR",
+                   help="keep the children's output here (default: a temporary directory, removed on success)")
     add_fault_arguments(p)
     add_record_argument(p)
     add_secure_arguments(p)
@@ -118,22 +123,22 @@ def run(args) -> int:
         secure.start(log_dir, backstop, wait_listening)
         children["robot"] = start_child("robot", ["robot", "--scenario", scenario_arg,
                                                   *secure.zenoh_args("robot", ["--zenoh-listen", robot_ep]), *can_robot,
-                                                  *common, "--duration", backstop], log_dir)
+                                                  *common, "--duration", backstop, *_json("robot", log_dir)], log_dir)
         robot_priority = raise_priority(children["robot"].popen.pid)
         if not secure.wait_up("robot", args.robot_id, children["robot"], STARTUP_TIMEOUT,
                               lambda: wait_listening(robot_ep, children["robot"], STARTUP_TIMEOUT)):
             raise RuntimeError(f"robot did not come up on {robot_ep}")
         # the console before the controller: its start-up (imports, a CPU burst) is over before the
         # controller runs its feedback timeout; it connects when the controller listens (Zenoh retries)
-        console_argv = ["console", "--script", scenario_arg, *secure.zenoh_args("operator", ["--zenoh-connect", console_ep]),
-                        *common]
+        console_argv = ["console", "--script", scenario_arg,
+                        *secure.zenoh_args("operator", ["--zenoh-connect", console_ep]), *common]
         console_argv += ["--zenoh-connect", recording.endpoint] if recording is not None and not secure.enabled else []
         children["console"] = start_child("console", console_argv + ([] if interactive else ["--headless"]), log_dir,
                                           interactive=interactive)
         controller_argv = ["controller", "--scenario", scenario_arg, *law,
                            *secure.zenoh_args("controller", ["--zenoh-listen", controller_ep]),
                            *can_controller, *common, "--duration", backstop]
-        children["controller"] = start_child("controller", controller_argv, log_dir)
+        children["controller"] = start_child("controller", controller_argv + _json("controller", log_dir), log_dir)
         if not secure.wait_up("controller", args.robot_id, children["controller"], STARTUP_TIMEOUT,
                               lambda: wait_listening(controller_ep, children["controller"], STARTUP_TIMEOUT)):
             raise RuntimeError(f"controller did not come up on {controller_ep}")
@@ -153,7 +158,8 @@ def run(args) -> int:
         faults.arm(t0)
         while not stop.stopped and time.monotonic() < t0 + duration:
             failure = faults.tick(time.monotonic(), children,
-                                  lambda: start_child("controller.restart", controller_argv, log_dir))
+                                  lambda: start_child("controller.restart",
+                                                      controller_argv + _json("controller.restart", log_dir), log_dir))
             dead = [c.name for n, c in children.items() if c.popen.poll() is not None and not faults.expected_dead(n)]
             if dead or failure:
                 failure = failure or f"{', '.join(dead)} exited during the run"
@@ -185,7 +191,8 @@ def run(args) -> int:
     summary = {"scenario": scenario.name, "controller": loop.controller.name, "requested_duration": duration, **result,
                "interrupted": stop.stopped, "failure": failure, "settle_seconds": settle,
                "robot_priority": robot_priority,
-               "processes": {name: children[name].report() for name in ("console", "controller", "robot") if name in children},
+               "processes": {name: _process_report(children[name], log_dir)
+                             for name in ("console", "controller", "robot") if name in children},
                "endpoints": {"robot": robot_ep, "controller": controller_ep, "can": " ".join(can[1:])},
                "wall_seconds": time.monotonic() - start, **secure.summary(rec)}
     if recording is not None:
@@ -206,6 +213,16 @@ def run(args) -> int:
     return 0 if summary["ok"] else 1
 
 
+def _json(name: str, log_dir: Path) -> list[str]:
+    """The options that have child `name` write its exit summary as JSON in the log directory."""
+    return ["--json", str(log_dir / f"{name}.json")]
+
+
+def _process_report(child: Child, log_dir: Path) -> dict:
+    """How the child ended and, if it wrote one (robot, controller), its exit summary (None: none, e.g. killed)."""
+    return {**child.report(), "summary": read_json(log_dir / f"{child.name}.json")}
+
+
 def _report(summary: dict, args, children: dict, log_dir: Path) -> None:
     emit(summary, args.json, _print_table)
     if not summary["ok"]:
@@ -216,7 +233,8 @@ def _report(summary: dict, args, children: dict, log_dir: Path) -> None:
                                f"{summary['violations']} violations" if summary["violations"] else None,
                                f"{summary['estops']} emergency stops" if summary["estops"] else None,
                                "a child did not exit cleanly" if not all(
-                                   p["exit_code"] == 0 and not p["killed"] for p in summary["processes"].values()) else None)
+                                   p["exit_code"] == 0 and not p["killed"]
+                                   for p in summary["processes"].values()) else None)
                    if r]
         print(f"sharedctl demo: FAILED ({'; '.join(reasons) or 'see the table'}); logs in {log_dir}", file=sys.stderr)
     elif not args.log_dir:
@@ -233,8 +251,12 @@ def _print_table(summary: dict) -> None:
     table.add_column("distributed", justify="right")
     table.add_column("sampled, robot plant", justify="right")
     table.add_column("sampled, model plant", justify="right")
-    fmt = lambda v: ("[" + ", ".join(f"{x:.3f}" for x in v) + "]") if isinstance(v, list) else (
-        f"{v:.4g}" if isinstance(v, float) else str(v))
+
+    def fmt(v) -> str:
+        if isinstance(v, list):
+            return "[" + ", ".join(f"{x:.3f}" for x in v) + "]"
+        return f"{v:.4g}" if isinstance(v, float) else str(v)
+
     for key in ("violations", "min_margin", "final_speed", "final_pose", "tracking_rmse", "final_error",
                 "human_authority", "switches", "theta_hat", "steps", "duration"):
         table.add_row(key, fmt(summary.get(key)), fmt(plant[key]) if key in plant else "",

@@ -1,1 +1,2 @@
-"""Fault injection: seeded network/CAN impairments, process faults, and the fault campaign."""
+"""Fault injection: seeded network/CAN impairments and process faults (the campaign that drives them is a
+study: services/studies/campaign/)."""

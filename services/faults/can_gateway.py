@@ -31,7 +31,7 @@ A frame's arrival time is the interface's kernel receive timestamp, so delays, w
 gateway got round to reading it; ``buffer_wait_ms`` (mean/max) is that reading lag.
 
 One thread: `select` on both buses' sockets, drain each ready bus in a batch (non-blocking
-reads until empty, at most BATCH frames; services/can_ports.py), release what is due
+reads until empty, at most BATCH frames, through services/can_transport/), release what is due
 from a heap, babble when due.
 As `sharedctl fault-relay`, faults act from SIGUSR1 on (``--arm-on-signal``), counters go to
 ``--stats FILE`` at exit, including the gateway's CPU time and the frame rate it handled.
@@ -49,10 +49,10 @@ from pathlib import Path
 
 import can
 
-from ..can_bus import BusSpec, open_bus, resolve
+from ..can_bus import BusSpec, open_transport, resolve
 from ..controller.priority import make_loop_realtime
 from ..lifecycle import StopFlag
-from ..can_ports import Frame, port_for
+from ..can_transport import Frame, transport_for
 from .impairments import Pipeline
 from .spec import FaultPlan, FaultSpecError, parse, pipeline
 from .zenoh_relay import add_fault_arguments, write_stats
@@ -106,7 +106,8 @@ class Stream:
         n = self.received
         return {**self.pipe.counters,
                 "buffer_wait_ms_mean": 1000.0 * self.wait_sum / n if n else None,
-                "buffer_wait_ms_max": 1000.0 * self.wait_max if n else None, "stages": self.pipe.describe(), "frames_seen": self.received,
+                "buffer_wait_ms_max": 1000.0 * self.wait_max if n else None, "stages": self.pipe.describe(),
+                "frames_seen": self.received,
                 "passed_unimpaired": self.unimpaired, "forwarded": self.forwarded, "send_errors": self.send_errors,
                 "latency_ms_mean": 1000.0 * self.latency_sum / self.latency_n if self.latency_n else None,
                 "latency_ms_max": 1000.0 * self.latency_max if self.latency_n else None}
@@ -116,7 +117,7 @@ class CanGateway:
     """Forward between `controller_bus` (A) and `robot_bus` (B) with the plan's ``can.*`` faults."""
 
     def __init__(self, controller_bus, robot_bus, plan: FaultPlan) -> None:
-        self.buses = {"controller": port_for(controller_bus), "robot": port_for(robot_bus)}
+        self.buses = {"controller": transport_for(controller_bus), "robot": transport_for(robot_bus)}
         self.link = plan.links["can"]
         self.streams = {kind: Stream(pipeline(plan, f"can.{kind}", corrupt_skip=HEADER.size))
                         for kind in ("command", "feedback")}
@@ -294,7 +295,7 @@ def run(args) -> int:
     buses = []
     try:
         for spec in specs:
-            buses.append(open_bus(spec))
+            buses.append(open_transport(spec))
     except (can.CanError, OSError, ValueError) as exc:
         for bus in buses:
             bus.shutdown()

@@ -1,6 +1,6 @@
 """The fault side of `sharedctl demo --fault SPEC`: wiring, process faults, counters, judgement.
 
-`demo_command` calls this module in a few places; with no ``--fault`` nothing here runs and
+The demo (`services/demo/command.py`) calls this module in a few places; with no ``--fault`` nothing here runs and
 the demo is exactly the unimpaired one.
 
 * ``operator.*``/``telemetry.*`` faults: a `sharedctl fault-relay` child listens on its own
@@ -42,7 +42,8 @@ READY_TIMEOUT = 15.0
 def add_arguments(p) -> None:
     p.add_argument("--fault", action="append", default=[], metavar="SPEC",
                    help="inject a fault, e.g. operator.delay_ms=300, can.loss=0.05, controller.kill_at=5 (repeatable)")
-    p.add_argument("--fault-seed", type=int, default=None, metavar="N", help="seed of the injected impairments (default 0)")
+    p.add_argument("--fault-seed", type=int, default=None, metavar="N",
+                   help="seed of the injected impairments (default 0)")
 
 
 @dataclass
@@ -109,7 +110,8 @@ class FaultStack:
         argv = [a for spec in self.plan.specs for a in ("--fault", spec)]
         return argv + ["--fault-seed", str(self.plan.seed), "--arm-on-signal"]
 
-    def start(self, controller_ep: str, robot_id: str, log_dir: Path, backstop: str, start_child, wait_listening) -> None:
+    def start(self, controller_ep: str, robot_id: str, log_dir: Path,
+              backstop: str, start_child, wait_listening) -> None:
         """Start the relay and/or the gateway (before the robot, console and controller)."""
         if self.can_ports is not None:
             stats, ready = log_dir / "fault-gateway.json", log_dir / "fault-gateway.ready"

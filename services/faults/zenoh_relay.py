@@ -227,10 +227,12 @@ def add_fault_arguments(p) -> None:
 
 
 def add_parser(subparsers) -> None:
-    p = subparsers.add_parser("fault-relay", help="Zenoh relay that injects operator.*/telemetry.* faults (demo --fault)",
+    p = subparsers.add_parser("fault-relay",
+                              help="Zenoh relay that injects operator.*/telemetry.* faults (demo --fault)",
                               description="Zenoh relay between console (--listen) and controller (--connect) "
                                           "that impairs operator.* and telemetry.* streams.")
-    p.add_argument("--listen", required=True, metavar="ENDPOINT", help="where the console connects (tcp/127.0.0.1:PORT)")
+    p.add_argument("--listen", required=True, metavar="ENDPOINT",
+                   help="where the console connects (tcp/127.0.0.1:PORT)")
     p.add_argument("--connect", required=True, metavar="ENDPOINT", help="the controller's endpoint")
     p.add_argument("--robot-id", default="robot1")
     add_fault_arguments(p)

@@ -23,8 +23,10 @@ PROG = "sharedctl record"
 def add_parser(subparsers) -> None:
     p = subparsers.add_parser("record", help="record a robot's Zenoh traffic (MCAP) and CAN bus (candump log)")
     p.add_argument("--out", metavar="DIR", required=True, help="directory for the .mcap and .can.log files")
-    p.add_argument("--zenoh-listen", metavar="EP", action="append", help="listen on this loopback endpoint (repeatable)")
-    p.add_argument("--zenoh-connect", metavar="EP", action="append", help="connect to this loopback endpoint (repeatable)")
+    p.add_argument("--zenoh-listen", metavar="EP", action="append",
+                   help="listen on this loopback endpoint (repeatable)")
+    p.add_argument("--zenoh-connect", metavar="EP", action="append",
+                   help="connect to this loopback endpoint (repeatable)")
     p.add_argument("--robot-id", default="robot1", help="robot id in the key expressions (default robot1)")
     can_bus.add_arguments(p)
     p.add_argument("--scenario", help="scenario file or packaged name, stored in the recording's metadata")
@@ -62,8 +64,9 @@ def run(args) -> int:
         summary = recorder.close()
         if session is not None:
             session.close()
-    print(f"{PROG}: {summary['messages']} messages on {len(summary['topics'])} topics, {summary['undecoded']} undecoded, "
-          f"{summary['dropped']} dropped" + (f", {summary['can_frames']} CAN frames" if spec is not None else ""),
+    print(f"{PROG}: {summary['messages']} messages on {len(summary['topics'])} topics, "
+          f"{summary['undecoded']} undecoded, {summary['dropped']} dropped"
+          + (f", {summary['can_frames']} CAN frames" if spec is not None else ""),
           flush=True)
     return 0 if summary["write_error"] is None and not failed else 1
 

@@ -111,7 +111,7 @@ def load_run(path: Path | str) -> RecordedRun:
 
 def _trace(states: list[tuple[float, dict]], commands: list[tuple[float, list]]) -> Trace:
     t = np.array([t for t, _ in states])
-    col = lambda name: _array([s[name] for _, s in states])   # noqa: E731
+    col = lambda name: _array([s[name] for _, s in states])   # noqa: E731 — one column of the states, by name
     n = len(states[0][1]["q"])
     q_d = np.full((len(t), n), np.nan)
     if commands:

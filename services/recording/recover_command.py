@@ -25,7 +25,8 @@ PROG = "sharedctl record-recover"
 
 
 def add_parser(subparsers) -> None:
-    p = subparsers.add_parser("record-recover", help="rewrite a crashed recording (.mcap or .can.log) as a complete file")
+    p = subparsers.add_parser("record-recover",
+                              help="rewrite a crashed recording (.mcap or .can.log) as a complete file")
     p.add_argument("input", metavar="IN", help="the .mcap (or .can.log) file a crashed recorder left")
     p.add_argument("output", metavar="OUT", help="where to write the complete file")
     p.set_defaults(handler=run)
@@ -80,8 +81,8 @@ def run(args) -> int:
     try:
         if source.name.endswith(".log"):
             result = recover_can_log(source, target)
-            print(f"{PROG}: {result['lines']} frames to {target}"
-                  + (f", a cut last line of {result['dropped_bytes']} bytes dropped" if result["dropped_bytes"] else ""))
+            dropped = f", a cut last line of {result['dropped_bytes']} bytes dropped" if result["dropped_bytes"] else ""
+            print(f"{PROG}: {result['lines']} frames to {target}{dropped}")
             return 0
         result = recover_mcap(source, target)
     except (OSError, ValueError) as exc:

@@ -36,7 +36,8 @@ def add_parser(subparsers) -> None:
     p.add_argument("--speed", type=float, default=1.0, metavar="X", help="playback speed, 1 = real time (default 1)")
     p.add_argument("--zenoh-listen", metavar="EP", action="append",
                    help=f"listen on this loopback endpoint (repeatable; default {zenoh_session.DEFAULT_ENDPOINT})")
-    p.add_argument("--zenoh-connect", metavar="EP", action="append", help="connect to this loopback endpoint (repeatable)")
+    p.add_argument("--zenoh-connect", metavar="EP", action="append",
+                   help="connect to this loopback endpoint (repeatable)")
     p.add_argument("--delay", type=float, default=1.0, metavar="S",
                    help="wait this long after opening the session, for viewers to connect (default 1)")
     p.set_defaults(handler=run)

@@ -2,17 +2,20 @@
 
     sharedctl robot [--scenario FILE|NAME] [--can-interface I --can-channel C --can-option k=v ...]
                     [--zenoh-listen EP | --zenoh-connect EP] [--robot-id ID] [--duration S]
-                    [--spin-us 100] [--cpu N]
+                    [--spin-us 100] [--cpu N] [--json OUT]
 
 Speaks CANSimple on the CAN bus (services/can_bus.py picks vcan0 or host-local udp_multicast),
 publishes GroundTruth on `sharedctl/v1/<robot>/truth` (100 Hz) and a liveliness token on
 `sharedctl/v1/<robot>/alive/robot`. `[robot_sim]` in the scenario overrides the simulation
-defaults (see plant.RobotSimConfig). SIGINT/SIGTERM: stops within 2 s, exit 0.
+defaults (see plant.RobotSimConfig). SIGINT/SIGTERM: stops within 2 s, exit 0, with a summary line
+for people and, with `--json OUT`, the summary as JSON (`summary`): what another module reads.
 """
 from __future__ import annotations
 
 import os
 import sys
+
+import zenoh
 
 from sharedctl.models import OmniRobot
 from sharedctl.protocol.errors import KeyExprError
@@ -24,6 +27,7 @@ from ..security import zenoh_config
 from ..lifecycle import StopFlag
 from ..service_config import add_argument as add_service_config_argument
 from ..scenario_files import load
+from ..summary_output import write_json
 from ..controller.priority import pin_to_cpu
 from .plant import RobotSimConfig, RobotSimConfigError
 from .process import CpuMeter, RobotProcess
@@ -43,11 +47,14 @@ def add_parser(subparsers) -> None:
     z.add_argument("--zenoh-connect", metavar="EP", help="loopback endpoint of a peer to connect to")
     zenoh_config.add_argument(p)
     p.add_argument("--robot-id", default="robot1", help="robot id in the Zenoh keys (default: robot1)")
-    p.add_argument("--duration", type=float, metavar="S", help="stop after S seconds (default: run until SIGINT/SIGTERM)")
+    p.add_argument("--duration", type=float, metavar="S",
+                   help="stop after S seconds (default: run until SIGINT/SIGTERM)")
     p.add_argument("--spin-us", type=float, default=100.0,
                    help="poll the clock for this long before each physics tick instead of sleeping, so the drives "
                         "send on time as a microcontroller's timer would (default 100; 0: plain sleep)")
     p.add_argument("--cpu", type=int, metavar="N", help="run the whole process on CPU N (default: no pinning)")
+    p.add_argument("--json", metavar="OUT", help="at exit, write the summary (physics steps, missed ticks, frames, "
+                                                 "watchdog trips, …) as JSON to OUT")
     add_service_config_argument(p)
     p.set_defaults(handler=run)
 
@@ -91,12 +98,12 @@ def run(args) -> int:
         pinned = f", on CPU {args.cpu}"
 
     try:
-        bus = can_bus.open_bus(spec)
-    except Exception as exc:  # python-can raises several types (CanError, OSError, ValueError)
+        bus = can_bus.open_transport(spec)
+    except Exception as exc:  # noqa: BLE001 — each CAN back-end raises its own types: any of them fails the start
         return _fail(f"cannot open CAN bus {spec.describe()}: {exc}", 1)
     try:
         session = zenoh_config.open_configured(args.zenoh_config, listen, connect)
-    except Exception as exc:  # zenoh.ZError, e.g. the port is taken
+    except (zenoh.ZError, ValueError) as exc:  # ZError: e.g. the port is taken; ValueError: a bad config
         bus.shutdown()
         return _fail(f"cannot open Zenoh session ({' '.join(listen + connect)}): {exc}", 1)
 
@@ -117,4 +124,21 @@ def run(args) -> int:
         bus.shutdown()
     print(f"{PROG}: stopped after {sim.time:.2f} s: {process.summary()}; cpu {100 * cpu.fraction():.0f}% of one core",
           flush=True)
+    if args.json:
+        try:
+            write_json(args.json, summary(process, cpu))
+        except OSError as exc:
+            return _fail(f"summary not written to {args.json}: {exc}", 1)
     return 0
+
+
+def summary(process: RobotProcess, cpu: CpuMeter) -> dict:
+    """The run as a dict, units in the key names: the simulation's figures (`RobotSimulation.summary`), the
+    loop's missed physics ticks, the CAN frames and GroundTruth messages, the process's CPU."""
+    counts = process.counts
+    return {**process.sim.summary(), "missed_ticks": counts["missed_ticks"],
+            "frames_in": counts["frames_in"], "frames_out": counts["frames_out"], "bad_frames": counts["bad_frames"],
+            "echoes_skipped": counts["echoes"], "other_nodes": counts["other_nodes"],
+            "error_frames": counts["error_frames"], "send_errors": counts["send_errors"],
+            "truth_messages": process.truth_seq,
+            "cpu_percent": 100.0 * cpu.fraction()}

@@ -97,24 +97,14 @@ class Plant:
         self.config = config
         m1, m3, a = model.theta
         self._m1, self._m3, self._a = float(m1), float(m3), float(a)
-        p = model.parameters
-        self._r, self._L, self._delta = p.wheel_radius, p.wheel_distance, p.delta
+        self._wheel_map = model.wheel_map          # B(ψ) in closed form, the model's own
 
     def initial_state(self, q0, qd0) -> PlantState:
         return PlantState(np.array(q0, dtype=float), np.array(qd0, dtype=float), np.zeros(3))
 
     def wheel_speeds(self, state: PlantState) -> tuple[float, float, float]:
-        """ω = B(ψ)ᵀ q̇ (rad/s), as OmniRobot.wheel_speeds computes it."""
-        return self._omega(state.q, state.qd)
-
-    def _omega(self, q, qd) -> tuple[float, float, float]:
-        psi, d, r, L = float(q[2]), self._delta, self._r, self._L
-        vx, vy, w = float(qd[0]), float(qd[1]), float(qd[2])
-        return (
-            (-math.sin(d + psi) * vx + math.cos(d + psi) * vy + L * w) / r,
-            (-math.sin(d - psi) * vx - math.cos(d - psi) * vy + L * w) / r,
-            (math.cos(psi) * vx + math.sin(psi) * vy + L * w) / r,
-        )
+        """ω = B(ψ)ᵀ q̇ (rad/s): the model's `WheelMap.wheel_speeds`."""
+        return self._wheel_map.wheel_speeds(np.asarray(state.q, float).tolist(), np.asarray(state.qd, float).tolist())
 
     def friction(self, omega) -> np.ndarray:
         """Per-wheel friction torque (N·m), same sign as ω (it opposes the motion)."""
@@ -135,20 +125,12 @@ class Plant:
         return tuple(out)
 
     def _derivative(self, q, qd, tau_drive, brakes=(0.0, 0.0, 0.0)):
-        """(q̇, q̈, d turns/dt) as float tuples; B(ψ) written out as in OmniRobot.input_matrix.
+        """(q̇, q̈, d turns/dt) as float tuples; ω = B(ψ)ᵀ q̇ and u = B(ψ) τ by the model's `WheelMap`.
 
         Plain floats rather than 3×3 numpy arrays: this runs 4000 times a second in real time.
         """
-        psi = q[2]
-        d, r, L = self._delta, self._r, self._L
         b, c, ws = self.config.friction_viscous, self.config.friction_coulomb, self.config.coulomb_smoothing
-        s1, c1 = math.sin(d + psi), math.cos(d + psi)
-        s2, c2 = math.sin(d - psi), math.cos(d - psi)
-        sp, cp = math.sin(psi), math.cos(psi)
-        vx, vy, w = qd
-        w0 = (-s1 * vx + c1 * vy + L * w) / r
-        w1 = (-s2 * vx - c2 * vy + L * w) / r
-        w2 = (cp * vx + sp * vy + L * w) / r
+        w0, w1, w2 = self._wheel_map.wheel_speeds(q, qd)
         t0 = tau_drive[0] - (b * w0 + c * math.tanh(w0 / ws))
         t1 = tau_drive[1] - (b * w1 + c * math.tanh(w1 / ws))
         t2 = tau_drive[2] - (b * w2 + c * math.tanh(w2 / ws))
@@ -157,9 +139,8 @@ class Plant:
             t0 -= brakes[0] * math.tanh(w0 / wb)
             t1 -= brakes[1] * math.tanh(w1 / wb)
             t2 -= brakes[2] * math.tanh(w2 / wb)
-        u0 = (-s1 * t0 - s2 * t1 + cp * t2) / r
-        u1 = (c1 * t0 - c2 * t1 + sp * t2) / r
-        u2 = L * (t0 + t1 + t2) / r
+        u0, u1, u2 = self._wheel_map.generalised_force(q, (t0, t1, t2))
+        vx, vy, w = qd
         qdd = ((u0 - self._a * w * vy) / self._m1, (u1 + self._a * w * vx) / self._m1, u2 / self._m3)
         return qd, qdd, (w0 / TWO_PI, w1 / TWO_PI, w2 / TWO_PI)
 
@@ -173,7 +154,7 @@ class Plant:
         torques (N·m, `brake_torques(engaged)`) held."""
         q = tuple(float(v) for v in state.q)
         qd = tuple(float(v) for v in state.qd)
-        tau_drive = self.drive_torque(tau, self._omega(q, qd))
+        tau_drive = self.drive_torque(tau, self._wheel_map.wheel_speeds(q, qd))
         h = 0.5 * dt
 
         def shift(x, k, f):

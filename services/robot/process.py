@@ -1,7 +1,7 @@
 """The robot process's I/O shell: CAN in/out, Zenoh ground truth and liveliness, the real-time loop.
 
 One thread. Every tick of the physics clock (1 kHz by default):
-  1. drain the CAN receive queue (non-blocking, through services/can_ports.py), decode each
+  1. drain the CAN receive queue (non-blocking, through a services/can_transport/ transport), decode each
      host → drive frame with the CANSimple codec and hand it to the simulation; answer RTR
      polls at once;
   2. advance the simulation to now (watchdogs, RK4 steps) and send the cyclic frames due
@@ -27,7 +27,7 @@ from sharedctl.protocol.errors import ProtocolError
 from sharedctl.protocol.messages import GroundTruth, Heartbeat
 from sharedctl.protocol.msgpack_codec import encode_message
 
-from ..can_ports import Frame, port_for
+from ..can_transport import Frame, Transport, transport_for
 from ..lifecycle import RateClock, StopFlag
 from .simulation import RobotSimulation, is_own_direction
 
@@ -53,12 +53,14 @@ class CpuMeter:
 
 
 class RobotProcess:
-    """Wires a `RobotSimulation` to an open CAN bus and an open Zenoh session (both owned by the caller)."""
+    """Wires a `RobotSimulation` to an open CAN bus and an open Zenoh session (both owned by the caller).
 
-    def __init__(self, sim: RobotSimulation, bus: can.BusABC, session, robot_id: str) -> None:
+    `bus` is a transport (services/can_transport/), or a python-can bus, wrapped in the generic one."""
+
+    def __init__(self, sim: RobotSimulation, bus: Transport | can.BusABC, session, robot_id: str) -> None:
         self.sim = sim
         self.bus = bus
-        self.port = port_for(bus)        # frames without python-can's per-frame Message (services/can_ports.py)
+        self.transport = transport_for(bus)
         self.session = session
         self.robot_id = robot_id
         self.nodes = tuple(sim.by_node)
@@ -75,7 +77,7 @@ class RobotProcess:
     def send(self, frame) -> None:
         f = cs.encode(frame)
         try:
-            self.port.send(f.arbitration_id, f.is_remote, f.dlc, f.data)
+            self.transport.send(f.arbitration_id, f.is_remote, f.dlc, f.data)
             self.counts["frames_out"] += 1
         except (can.CanError, OSError):
             self.counts["send_errors"] += 1
@@ -83,7 +85,7 @@ class RobotProcess:
     def receive_pending(self, now: float) -> None:
         for _ in range(MAX_FRAMES_PER_TICK):
             try:
-                frame = self.port.recv(0.0)
+                frame = self.transport.recv(0.0)
             except (can.CanError, OSError, ValueError):
                 self.counts["bad_frames"] += 1
                 continue
@@ -171,7 +173,7 @@ class RobotProcess:
             if entity is not None:
                 try:
                     entity.undeclare()
-                except Exception as exc:  # closing must go on
+                except Exception as exc:  # noqa: BLE001 — closing must go on
                     print(f"sharedctl robot: undeclare failed: {exc}", file=sys.stderr)
 
     def summary(self) -> str:

@@ -88,6 +88,12 @@ class RobotSimulation:
     def truth_due(self, now: float) -> bool:
         return self.truth_schedule.due(now)
 
+    def summary(self) -> dict:
+        """How far the simulation got: its time, the physics steps it took and the time it skipped (stalls
+        longer than MAX_CATCH_UP_STEPS steps), and the drives' watchdog trips."""
+        return {"elapsed_s": self.time, "physics_steps": self.steps, "skipped_s": self.skipped_time,
+                "watchdog_trips": self.watchdog_trips}
+
     def _update_feedback(self) -> None:
         omega = self.plant.wheel_speeds(self.state)
         for j, axis in enumerate(self.axes):

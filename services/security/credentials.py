@@ -97,7 +97,8 @@ def _leaf(common_name: str, ca_cert: x509.Certificate, ca_key, days: int, server
     key = ec.generate_private_key(ec.SECP256R1())
     builder = (_builder(common_name, ca_cert.subject, key.public_key(), days)
                .add_extension(x509.BasicConstraints(ca=False, path_length=None), critical=True)
-               .add_extension(x509.KeyUsage(True, False, False, False, False, False, False, False, False), critical=True)
+               .add_extension(x509.KeyUsage(True, False, False, False, False, False, False, False, False),
+                              critical=True)
                .add_extension(x509.AuthorityKeyIdentifier.from_issuer_public_key(ca_key.public_key()), critical=False))
     if server_hosts:
         sans: list[x509.GeneralName] = []
@@ -125,7 +126,8 @@ def generate(directory: str | Path, roles=ROLES, hosts=DEFAULT_HOSTS, days: int 
         ca_key = ec.generate_private_key(ec.SECP256R1())
         ca_cert = (_builder("sharedctl site CA", _name("sharedctl site CA"), ca_key.public_key(), days)
                    .add_extension(x509.BasicConstraints(ca=True, path_length=0), critical=True)
-                   .add_extension(x509.KeyUsage(False, False, False, False, False, True, True, False, False), critical=True)
+                   .add_extension(x509.KeyUsage(False, False, False, False, False, True, True, False, False),
+                                  critical=True)
                    .add_extension(x509.SubjectKeyIdentifier.from_public_key(ca_key.public_key()), critical=False)
                    .sign(ca_key, hashes.SHA256()))
         creds = Credentials(directory, {role: secrets.token_urlsafe(24) for role in roles})

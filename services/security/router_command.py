@@ -81,7 +81,8 @@ def run(args) -> int:
         session.close()
     wall = time.monotonic() - start
     cpu = time.process_time()
-    print(f"{PROG}: stopped after {wall:.1f} s; cpu {cpu:.2f} s ({100 * cpu / max(wall, 1e-9):.0f}% of one core)", flush=True)
+    print(f"{PROG}: stopped after {wall:.1f} s; "
+          f"cpu {cpu:.2f} s ({100 * cpu / max(wall, 1e-9):.0f}% of one core)", flush=True)
     return 0
 
 

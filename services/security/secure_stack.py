@@ -1,6 +1,6 @@
 """The secure side of `sharedctl demo --secure`: throw-away credentials, a router, per-role clients.
 
-`demo_command` calls this module in a few places; without ``--secure`` every method is inert
+The demo (`services/demo/command.py`) calls this module in a few places; without ``--secure`` every method is inert
 and the demo is the plain peer-to-peer one.
 
 With ``--secure``:
@@ -146,7 +146,8 @@ class SecureStack:
             "rejected_messages": int(last.link.rejected_messages) if last is not None else None,
             "security": {
                 "router_endpoint": self.endpoint,
-                "authentication": "usrpwd" + (" + mTLS client certificates" if self.endpoint.startswith("tls/") else ""),
+                "authentication": "usrpwd"
+                                  + (" + mTLS client certificates" if self.endpoint.startswith("tls/") else ""),
                 "access_control": "default deny; per-role rules (services/security/roles.py)",
                 "roles": {"robot": "robot", "controller": "controller", "console": "operator", "demo": "observer"},
                 "router": self.router.report() if self.router is not None else None,

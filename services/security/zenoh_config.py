@@ -76,7 +76,7 @@ def _get(cfg: zenoh.Config, key: str):
 def _insert(cfg: zenoh.Config, key: str, value) -> None:
     try:
         cfg.insert_json5(key, json.dumps(value))
-    except Exception as exc:   # noqa: BLE001 — zenoh.ZError
+    except Exception as exc:   # zenoh.ZError
         raise ZenohConfigError(f"{key}: {exc}") from exc
 
 
@@ -112,7 +112,7 @@ def from_file(path: str | Path, listen: list[str] | None = None, connect: list[s
         raise ZenohConfigError(f"{path}: no such file")
     try:
         cfg = zenoh.Config.from_file(str(path))
-    except Exception as exc:   # noqa: BLE001 — zenoh.ZError: syntax or an unknown key
+    except Exception as exc:   # zenoh.ZError: syntax or an unknown key
         raise ZenohConfigError(f"{path}: {exc}") from exc
     if listen:
         _insert(cfg, "listen/endpoints", list(listen))

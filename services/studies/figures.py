@@ -19,11 +19,11 @@ import matplotlib
 
 matplotlib.use("Agg")
 
-import numpy as np  # noqa: E402
-from matplotlib.collections import LineCollection  # noqa: E402
-from matplotlib.figure import Figure  # noqa: E402
-from matplotlib.lines import Line2D  # noqa: E402
-from matplotlib.patches import Patch  # noqa: E402
+import numpy as np
+from matplotlib.collections import LineCollection
+from matplotlib.figure import Figure
+from matplotlib.lines import Line2D
+from matplotlib.patches import Patch
 
 AUTHORITY = {0: ("human", "#1f77b4"), 1: ("shared", "#ff7f0e"), 2: ("machine", "#d62728")}
 SET_CLASS = {0: ("safe", "#b7e1a1"), 1: ("hysteresis", "#fdd49e"), 2: ("hazard", "#f4606c")}
@@ -381,7 +381,8 @@ def _legend(ax, handles=None, **kwargs) -> None:
               framealpha=0.9, **kwargs)
 
 
-def _time_axis(ax) -> None:
+def time_axis(ax) -> None:
+    """The time axis of a signal panel: label and grid."""
     ax.set_xlabel("t (s)")
     ax.grid(True, alpha=0.3)
 
@@ -398,7 +399,7 @@ def run_figure(trace, loop, title: str) -> Figure:
         trajectory_panel(fig.add_subplot(left[0]), trace, loop, "(a) Path in the feasible set")
         margin_panel(ax := fig.add_subplot(left[1]), trace, loop)
         ax.set_title("(f) " + ax.get_title())
-        _time_axis(ax)
+        time_axis(ax)
         first = None
         for k, (panel, tag) in enumerate(((states_panel, "b"), (inputs_panel, "c"),
                                           (authority_panel, "d"), (estimates_panel, "e"))):
@@ -406,7 +407,7 @@ def run_figure(trace, loop, title: str) -> Figure:
             first = first or ax
             panel(ax, trace, loop)
             ax.set_title(f"({tag}) " + ax.get_title())
-            _time_axis(ax)
+            time_axis(ax)
         fig.suptitle(title, fontsize=14, fontweight="bold")
     return fig
 
@@ -429,7 +430,7 @@ def response_figure(trace, loop, title: str) -> Figure:
             first = first or ax
             panel(ax, trace, loop, **kwargs)
             ax.set_title(f"({'abcdefgh'[k]}) " + ax.get_title())
-            _time_axis(ax)
+            time_axis(ax)
         fig.suptitle(title, fontsize=14, fontweight="bold")
     return fig
 
@@ -491,7 +492,8 @@ def paper_figures(runs: Sequence[Run]) -> Iterator[PaperFigure]:
         where = PAPER_SET_NAMES.get(scenario, scenario)
         caption = f"Trajectory tracking under the {where}: {', '.join(r.controller for r in group)} paths"
         yield PaperFigure(f"fig{base}_{scenario}_trajectory.png",
-                          caption.replace("$", "") + " in the shaded feasible set, arrows along the direction of travel",
+                          caption.replace("$", "")
+                          + " in the shaded feasible set, arrows along the direction of travel",
                           comparison_figure(group, f"Figure {base}. {caption}"))
         for r in group:
             number = base + 1 + order.index(r.controller)

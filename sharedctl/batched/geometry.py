@@ -58,7 +58,8 @@ class GroupTable:
         keys: dict = {}
         region_rows = []
         for region in feasible.regions:
-            idx = [keys.setdefault((tuple(region.K[j]), float(region.T[j])), len(keys)) for j in range(region.K.shape[0])]
+            idx = [keys.setdefault((tuple(region.K[j]), float(region.T[j])), len(keys))
+                   for j in range(region.K.shape[0])]
             region_rows.append(np.array(idx, dtype=int))
         P = len(keys)
         row_K, row_T = np.zeros((P, n)), np.zeros((P, 1))
@@ -259,7 +260,8 @@ def missed_rows(table: GroupTable, situation: Situation) -> np.ndarray:
     return table.missed_sel @ situation.hazard_rows
 
 
-def select_group(table: GroupTable, situation: Situation, value: np.ndarray, missed: np.ndarray, ref_ok: np.ndarray) -> np.ndarray:
+def select_group(table: GroupTable, situation: Situation, value: np.ndarray, missed: np.ndarray,
+                 ref_ok: np.ndarray) -> np.ndarray:
     """sharing.select_group for every robot: (N,) group index, −1 for none.
 
     Among the groups whose polytope contains q and whose value is finite, the least key

@@ -22,7 +22,9 @@ from typing import Sequence
 
 import numpy as np
 
-from ..human import AdversarialOperator, CircleTrajectory, HumanModel, JoystickSpring, LineTrajectory, ScriptedOperator
+from ..human import (
+    AdversarialOperator, CircleTrajectory, HumanModel, JoystickSpring, LineTrajectory, ScriptedOperator, intent,
+)
 
 
 @dataclass(frozen=True)
@@ -57,8 +59,9 @@ class OperatorBatch:
         (n, N), deflection (N,); each wish is the point `target`, as the scenario files build it."""
         n, N = target.shape
         zeros, none = np.zeros((n, N)), np.zeros(N, bool)
-        return OperatorBatch(np.ascontiguousarray(np.broadcast_to(kp, (n, N)), dtype=float), zeros, np.ones(N, bool), target.astype(float),
-                             np.broadcast_to(deflection, (N,)).astype(float), none, target.astype(float), zeros,
+        return OperatorBatch(np.ascontiguousarray(np.broadcast_to(kp, (n, N)), dtype=float), zeros, np.ones(N, bool),
+                             target.astype(float), np.broadcast_to(deflection, (N,)).astype(float), none,
+                             target.astype(float), zeros,
                              np.zeros((2, N)), np.zeros(N), np.zeros(N), np.zeros(N))
 
     @property
@@ -67,7 +70,8 @@ class OperatorBatch:
 
     def take(self, index) -> "OperatorBatch":
         """The operators of robots `index` (an index array or slice over the batch)."""
-        return OperatorBatch(**{name: np.ascontiguousarray(getattr(self, name)[..., index]) for name in self.__dataclass_fields__})
+        return OperatorBatch(**{name: np.ascontiguousarray(getattr(self, name)[..., index])
+                                for name in self.__dataclass_fields__})
 
     # ----- the wish ------------------------------------------------------------
     @cached_property
@@ -133,7 +137,7 @@ class OperatorBatch:
     def command(self, desired: DesiredBatch, q: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(u_h (n, N), v_h (N,)): the force (44) and the intent (45)."""
         d = self.deflection_of(desired, q, v)
-        return self.kp * d, 0.5 * np.sum(self.kp * (d * d), axis=0)
+        return self.kp * d, intent(self.kp, d)
 
     def force(self, desired: DesiredBatch, q: np.ndarray, v: np.ndarray) -> np.ndarray:
         return self.kp * self.deflection_of(desired, q, v)
@@ -167,4 +171,5 @@ def operators_from_models(models: Sequence[HumanModel], n: int) -> OperatorBatch
             center[:, i], radius[i], omega[i], phase[i] = traj.center, traj.radius, traj.omega, traj.phase
         else:
             raise TypeError(f"robot {i}: {type(traj).__name__} cannot be batched (line, point, circle only)")
-    return OperatorBatch(kp, ratio, adversarial, target, deflection, circle, start, velocity, center, radius, omega, phase)
+    return OperatorBatch(kp, ratio, adversarial, target, deflection, circle, start, velocity, center, radius, omega,
+                         phase)

@@ -123,7 +123,8 @@ class BatchProblem:
         elif operators.size != N:
             raise ValueError(f"{operators.size} operators for {N} robots")
         th0 = np.zeros(k) if loop.theta_hat0 is None else np.asarray(loop.theta_hat0, float)
-        theta_hat0 = np.repeat(th0[:, None], N, axis=1) if theta_hat0 is None else _columns(theta_hat0, k, N, "theta_hat0")
+        theta_hat0 = (np.repeat(th0[:, None], N, axis=1) if theta_hat0 is None
+                      else _columns(theta_hat0, k, N, "theta_hat0"))
         theta = np.repeat(loop.model.theta[:, None], N, axis=1)
         return BatchProblem(loop.model, loop.feasible, loop.controller, loop.sharing, loop.reference,
                             _columns(q0, n, N, "q0"), _columns(v0, n, N, "v0"), theta_hat0, theta, operators)

@@ -31,7 +31,8 @@ class Rows:
     authority: np.ndarray  # (M,) −1 on a row recorded at an escape
     margin: np.ndarray
     inside: np.ndarray
-    extra: dict            # the remaining Trace columns (v_hat, q_d, u_h, u_f, set_class, group, role, k_h, k_f, intent)
+    # the remaining Trace columns (v_hat, q_d, u_h, u_f, set_class, group, role, k_h, k_f, intent)
+    extra: dict
 
 
 @dataclass
@@ -53,8 +54,9 @@ class Tally:
 
     @staticmethod
     def empty(M: int, n_theta: int) -> "Tally":
-        return Tally(np.zeros(M, np.int64), np.zeros(M, np.int64), np.full(M, np.inf), np.zeros(M), np.zeros(M, np.int64),
-                     np.full(M, np.nan), np.zeros(M, np.int64), np.zeros(M, bool), np.full(M, -1, np.int64),
+        return Tally(np.zeros(M, np.int64), np.zeros(M, np.int64), np.full(M, np.inf), np.zeros(M),
+                     np.zeros(M, np.int64), np.full(M, np.nan), np.zeros(M, np.int64), np.zeros(M, bool),
+                     np.full(M, -1, np.int64),
                      np.full(M, np.iinfo(np.int64).max), np.ones(M, bool), np.full((n_theta, M), np.nan))
 
     def take(self, index) -> "Tally":
@@ -145,7 +147,8 @@ def finish(dt: float, tally: Tally, switches, group_switches, trace_finite, reco
     dwell = np.where(unset, np.nan, tally.min_dwell_steps.astype(float) * dt)
     return BatchResult(
         dt=dt, steps=rows.copy(), violations=tally.violations.copy(),
-        min_margin=np.where(rows > 0, tally.min_margin, np.nan), tracking_rmse=rmse, final_error=tally.final_error.copy(),
+        min_margin=np.where(rows > 0, tally.min_margin, np.nan), tracking_rmse=rmse,
+        final_error=tally.final_error.copy(),
         human_authority=np.where(rows > 0, tally.human_rows / np.maximum(rows, 1), 0.0),
         switches=np.asarray(switches).copy(), group_switches=np.asarray(group_switches).copy(), min_dwell=dwell,
         theta_hat=tally.theta_hat.T.copy(), finite=np.asarray(trace_finite) & tally.rows_finite,
@@ -179,4 +182,5 @@ class Recording:
     def trace(self, i: int, steps: int, finite: bool, switches: int, group_switches: int, model) -> Trace:
         cols = {name: (arr[:steps, ..., i]) for name, arr in self.cols.items()}
         tau = plant.wheel_torques(cols["q"], cols["u_s"], model)
-        return Trace(t=self.t[:steps, i], tau=tau, **cols, finite=finite, switches=switches, group_switches=group_switches)
+        return Trace(t=self.t[:steps, i], tau=tau, **cols, finite=finite, switches=switches,
+                     group_switches=group_switches)

@@ -22,7 +22,8 @@ from .results import BatchResult, Recording, Tally, finish
 from .step import StepKernel
 
 
-def simulate_batch(problem: BatchProblem, duration: float, dt: float, record: bool = False, chunk: int = 8192) -> BatchResult:
+def simulate_batch(problem: BatchProblem, duration: float, dt: float, record: bool = False,
+                   chunk: int = 8192) -> BatchResult:
     """Run every robot of `problem` for `duration` s with step `dt` (simulator.simulate's algorithm).
 
     Returns per-robot summaries (the fields of metrics.summarize); with `record`, also every
@@ -77,7 +78,8 @@ class Engine:
         self.shape, self.lam = problem.reference, controller.tracking.lam
         self.table = GroupTable.of(problem.feasible)
         tracking = _vector_law(controller.tracking, self.n, self.k)
-        hazard = tracking if controller.hazard is controller.tracking else _vector_law(controller.hazard, self.n, self.k)
+        hazard = (tracking if controller.hazard is controller.tracking
+                  else _vector_law(controller.hazard, self.n, self.k))
         self.laws = (tracking, hazard)                        # by LawRole
         self.distinct = list(dict.fromkeys(self.laws))
         self._serves = np.array([[law is self.laws[r] for r in (0, 1)] for law in self.distinct])
@@ -97,7 +99,8 @@ class Engine:
         Y[L.q], Y[L.v], Y[L.theta] = problem.q0, problem.v0, problem.theta_hat0
         if self.observer:
             Y[L.obs] = self.observer.initial_state(problem.q0)
-        fleet = Fleet(ids, Y, ArbiterArrays.initial(self.sharing, N), problem.operators, problem.theta, Tally.empty(N, self.k))
+        fleet = Fleet(ids, Y, ArbiterArrays.initial(self.sharing, N), problem.operators, problem.theta,
+                      Tally.empty(N, self.k))
         for k in range(steps):
             if fleet.size == 0:
                 break
@@ -149,5 +152,6 @@ class Fleet:
         keep[cols] = False
         self.ids, self.Y = self.ids[keep], self.Y[:, keep]
         self.arbiter = self.arbiter.take(keep)
-        self.law_role, self.engaged_before, self.has_state = self.law_role[keep], self.engaged_before[keep], self.has_state[keep]
+        self.law_role, self.engaged_before, self.has_state = (self.law_role[keep], self.engaged_before[keep],
+                                                              self.has_state[keep])
         self.operators, self.theta, self.tally = self.operators.take(keep), self.theta[:, keep], self.tally.take(keep)

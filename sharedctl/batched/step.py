@@ -18,7 +18,9 @@ import numpy as np
 
 from ..sharing import Mode
 from .arbiter import HUMAN, MACHINE, arbitrate
-from .geometry import all_groups, classify, missed_rows, projected_configuration, reference_inside, row_reference, select_group
+from .geometry import (
+    all_groups, classify, missed_rows, projected_configuration, reference_inside, row_reference, select_group,
+)
 from .laws import GroupFrame, coordinates, gather, projected_reference, scatter
 from .plant import acceleration, project
 from .results import Rows
@@ -63,7 +65,8 @@ class StepKernel:
         situation = classify(table, groups.rows, e.sharing.bands)
         missed = missed_rows(table, situation)
         chosen = select_group(table, situation, groups.value, missed, ref_ok)
-        fleet.arbiter, dec = arbitrate(table, e.sharing, fleet.arbiter, situation, groups.rows.x, missed, chosen, intent, dt)
+        fleet.arbiter, dec = arbitrate(table, e.sharing, fleet.arbiter, situation, groups.rows.x, missed, chosen,
+                                       intent, dt)
 
         # --- law (re)initialisation, as in simulator.simulate --------------------------------
         engaged = (dec.authority != HUMAN) & (dec.group >= 0)
@@ -168,7 +171,8 @@ class StepKernel:
             for i, w in enumerate(wishes):
                 same = next((refs[j] for j in range(i) if wishes[j] is w), None)
                 if same is None:
-                    same = projected_reference(frame, gather(w.q, sel), gather(w.q_dot, sel), gather(w.q_ddot, sel), e.shape)
+                    same = projected_reference(frame, gather(w.q, sel), gather(w.q_dot, sel), gather(w.q_ddot, sel),
+                                               e.shape)
                 refs.append(same)
             entries.append((law, cols, sel, frame, refs))
         return entries
@@ -198,7 +202,8 @@ class StepKernel:
             else:
                 escaped[cols] |= ~c.inside
             size = law.state_size
-            u, theta_dot, rate = law.evaluate(frame, c, gather(v_meas, sel), gather(theta_hat, sel), gather(law_state[:size], sel))
+            u, theta_dot, rate = law.evaluate(frame, c, gather(v_meas, sel), gather(theta_hat, sel),
+                                              gather(law_state[:size], sel))
             if record:
                 scatter(u_f, sel, u)
             u *= gather(dec.machine_weight, sel)

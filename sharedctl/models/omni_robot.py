@@ -9,6 +9,32 @@ B(ψ) = (1/r) [[−sin(δ+ψ), −sin(δ−ψ), cos ψ],
 θ = [m1, m3, a] with m1 = M_p + 3I_r/(2r²), m3 = I_p + 3I_r L_r²/r², a = 3I_r/(2r²).
 Wheel speeds are ω = Bᵀ q̇ (power balance uᵀq̇ = τᵀω). C is skew-symmetric and M is
 constant, so Ṁ − 2C is skew-symmetric as the passivity property requires.
+
+The wheel map in closed form (`WheelMap`). Each wheel's drive direction turns with the body
+and the L_r row does not, so B(ψ) is the body-frame matrix turned by the yaw:
+
+    B(ψ) = blockdiag(R(ψ), 1) · B(0),   R(ψ) = [[cos ψ, −sin ψ], [sin ψ, cos ψ]],
+    B(0) = (1/r) [[−s, −s, 1], [c, −c, 0], [L_r, L_r, L_r]],   s = sin δ, c = cos δ.
+
+det B(0) = 2 c L_r (1 + s) / r³ (≠ 0 for |δ| < π/2, L_r > 0), and
+
+    B(0)⁻¹ = r [[−1/(2(1+s)),  1/(2c), 1/(2L_r(1+s))],
+                [−1/(2(1+s)), −1/(2c), 1/(2L_r(1+s))],
+                [  1/(1+s),      0,    s/(L_r(1+s))  ]].
+
+With the body-frame force f = R(ψ)ᵀ[u_x, u_y] and velocity b = R(ψ)ᵀ[ẋ, ẏ]:
+
+    τ = B(ψ)⁻¹ u  = B(0)⁻¹ [f, u_ψ]               (the wheel torques that realise u)
+    ω = B(ψ)ᵀ q̇   = B(0)ᵀ [b, ψ̇]                  (what the wheel encoders see)
+    q̇ = B(ψ)⁻ᵀ ω  = blockdiag(R(ψ), 1) B(0)⁻ᵀ ω    (odometry)
+    u = B(ψ) τ    = blockdiag(R(ψ), 1) B(0) τ      (the generalised force of the wheel torques)
+
+— one cos, one sin and a dozen products per call on Python floats, where `np.linalg.solve` on a
+freshly built 3×3 costs microseconds. The coefficients depend only on the fixed parameters, so the
+model computes them once. A non-finite yaw gives NaN components (as the numpy solve does) and a
+non-finite input non-finite ones, never an exception: the controller's finiteness check turns
+either into an estop. `input_matrix` stays the printed B(ψ), the reference the closed form is
+tested against.
 """
 from __future__ import annotations
 
@@ -18,6 +44,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .base import EulerLagrangeModel
+
+_cos, _sin, _isfinite, _NAN = math.cos, math.sin, math.isfinite, math.nan   # one lookup each (`WheelMap`)
 
 
 @dataclass(frozen=True)
@@ -41,10 +69,91 @@ class OmniRobotParameters:
 
 
 @dataclass(frozen=True)
+class WheelMap:
+    """B(ψ) = blockdiag(R(ψ), 1) · B(0) and its inverse on Python floats (see the module docstring).
+
+    Every method takes the pose q (only its yaw ψ = q[2] is used) and a 3-sequence of floats, and
+    returns a 3-tuple of floats. A non-finite yaw makes cos ψ = sin ψ = NaN (`math.cos(inf)` raises;
+    the numpy solve gives NaN); each method writes that out rather than calling a helper, which
+    would cost as much as its arithmetic in the simulated robot's 4 kHz RK4 stages.
+    """
+
+    s_r: float      # sin δ / r    }
+    c_r: float      # cos δ / r    } B(0) = [[−s_r, −s_r, 1/r], [c_r, −c_r, 0], [L_r/r, L_r/r, L_r/r]]
+    one_r: float    # 1 / r        }
+    l_r: float      # L_r / r      }
+    k_x: float      # r / (2(1 + s))        }
+    k_y: float      # r / (2c)              } B(0)⁻¹ = [[−k_x, k_y, k_m], [−k_x, −k_y, k_m], [2k_x, 0, k_s]]
+    k_m: float      # r / (2L_r(1 + s))     }
+    k_s: float      # r s / (L_r(1 + s))    }
+
+    @classmethod
+    def of(cls, parameters: OmniRobotParameters) -> "WheelMap":
+        r, L, delta = parameters.wheel_radius, parameters.wheel_distance, parameters.delta
+        s, c = math.sin(delta), math.cos(delta)
+        if r == 0.0 or L == 0.0 or c == 0.0 or 1.0 + s == 0.0:
+            raise ValueError(f"B(0) is singular for r={r}, L_r={L}, δ={delta}: no wheel map")
+        return cls(s_r=s / r, c_r=c / r, one_r=1.0 / r, l_r=L / r,
+                   k_x=r / (2.0 * (1.0 + s)), k_y=r / (2.0 * c), k_m=r / (2.0 * L * (1.0 + s)),
+                   k_s=r * s / (L * (1.0 + s)))
+
+    def wheel_torques(self, q, u) -> tuple[float, float, float]:
+        """τ = B(0)⁻¹ [R(ψ)ᵀ [u_x, u_y], u_ψ] = B(ψ)⁻¹ u (N·m)."""
+        psi = q[2]
+        if _isfinite(psi):
+            cos, sin = _cos(psi), _sin(psi)
+        else:
+            cos = sin = _NAN
+        ux, uy, m = u
+        fx, fy = cos * ux + sin * uy, cos * uy - sin * ux          # the force in the body frame
+        x, y, z = self.k_x * fx, self.k_y * fy, self.k_m * m
+        return z - x + y, z - x - y, 2.0 * x + self.k_s * m
+
+    def body_velocity(self, q, omega) -> tuple[float, float, float]:
+        """q̇ = blockdiag(R(ψ), 1) B(0)⁻ᵀ ω = B(ψ)⁻ᵀ ω (or Δq for wheel angle increments Δφ)."""
+        w0, w1, w2 = omega
+        pair = w0 + w1
+        bx = self.k_x * (2.0 * w2 - pair)                         # the velocity in the body frame
+        by = self.k_y * (w0 - w1)
+        psi = q[2]
+        if _isfinite(psi):
+            cos, sin = _cos(psi), _sin(psi)
+        else:
+            cos = sin = _NAN
+        return cos * bx - sin * by, sin * bx + cos * by, self.k_m * pair + self.k_s * w2
+
+    def wheel_speeds(self, q, v) -> tuple[float, float, float]:
+        """ω = B(0)ᵀ [R(ψ)ᵀ [ẋ, ẏ], ψ̇] = B(ψ)ᵀ q̇ (rad/s)."""
+        psi = q[2]
+        if _isfinite(psi):
+            cos, sin = _cos(psi), _sin(psi)
+        else:
+            cos = sin = _NAN
+        vx, vy, w = v
+        bx, by = cos * vx + sin * vy, cos * vy - sin * vx           # the velocity in the body frame
+        x, y, z = self.s_r * bx, self.c_r * by, self.l_r * w
+        return z - x + y, z - x - y, self.one_r * bx + z
+
+    def generalised_force(self, q, tau) -> tuple[float, float, float]:
+        """u = blockdiag(R(ψ), 1) B(0) τ = B(ψ) τ."""
+        t0, t1, t2 = tau
+        fx = self.one_r * t2 - self.s_r * (t0 + t1)                # the force in the body frame
+        fy = self.c_r * (t0 - t1)
+        psi = q[2]
+        if _isfinite(psi):
+            cos, sin = _cos(psi), _sin(psi)
+        else:
+            cos = sin = _NAN
+        return cos * fx - sin * fy, sin * fx + cos * fy, self.l_r * (t0 + t1 + t2)
+
+
+@dataclass(frozen=True)
 class OmniRobot(EulerLagrangeModel):
     """Omnidirectional robot, `kind = "omni3"` in scenario files."""
 
     parameters: OmniRobotParameters = field(default_factory=OmniRobotParameters)
+    #: the wheel map B(ψ) in closed form, computed once from the (fixed) parameters
+    wheel_map: WheelMap = field(init=False, repr=False, compare=False)
     n = 3
     n_theta = 3
     coordinate_names = ("x", "y", "psi")
@@ -52,6 +161,9 @@ class OmniRobot(EulerLagrangeModel):
     # a wheeled robot of up to ~200 kg: m1 (kg), m3 (kg m²), a (kg); 0 admits the paper's θ̂(0) = 0
     theta_lower = (0.0, 0.0, 0.0)
     theta_upper = (200.0, 50.0, 100.0)
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "wheel_map", WheelMap.of(self.parameters))
 
     @property
     def theta(self) -> np.ndarray:
@@ -111,14 +223,21 @@ class OmniRobot(EulerLagrangeModel):
             ]
         )
 
+    # ----- the wheel map (`WheelMap`, in closed form) on numpy vectors; the 500 Hz controller
+    # calls `wheel_map` on Python floats directly ----------------------------------------------
     def wheel_torques(self, q: np.ndarray, u: np.ndarray) -> np.ndarray:
         """τ = B(ψ)⁻¹ u: the wheel torques (N·m) that realise the generalised force u."""
-        return np.linalg.solve(self.input_matrix(q), u)
+        return np.array(self.wheel_map.wheel_torques(_floats(q), _floats(u)))
 
     def wheel_speeds(self, q: np.ndarray, v: np.ndarray) -> np.ndarray:
         """ω = B(ψ)ᵀ q̇ (rad/s): what the wheel encoders see."""
-        return self.input_matrix(q).T @ v
+        return np.array(self.wheel_map.wheel_speeds(_floats(q), _floats(v)))
 
     def body_velocity_from_wheels(self, q: np.ndarray, wheel_speeds: np.ndarray) -> np.ndarray:
         """q̇ = B(ψ)⁻ᵀ ω: odometry from the wheel encoders."""
-        return np.linalg.solve(self.input_matrix(q).T, wheel_speeds)
+        return np.array(self.wheel_map.body_velocity(_floats(q), _floats(wheel_speeds)))
+
+
+def _floats(x) -> list:
+    """A 3-vector as Python floats (numpy scalars would warn on inf − inf instead of quietly giving NaN)."""
+    return np.asarray(x, dtype=float).tolist()

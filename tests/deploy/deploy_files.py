@@ -21,11 +21,12 @@ def compose() -> dict:
 
 
 def locked_version(package: str) -> str:
-    for line in (ROOT / "requirements.lock").read_text().splitlines():
-        name, _, version = line.partition("==")
-        if name.strip().lower() == package.lower():
-            return version.strip()
-    raise AssertionError(f"{package} is not in requirements.lock")
+    """The version requirements/runtime.lock (what the image installs) pins `package` to."""
+    for line in (ROOT / "requirements" / "runtime.lock").read_text().splitlines():
+        name, sep, rest = line.partition("==")
+        if sep and name.strip().lower() == package.lower():
+            return rest.split(";")[0].rstrip(" \\")
+    raise AssertionError(f"{package} is not in requirements/runtime.lock")
 
 
 def parse_command(argv: list[str]):
@@ -35,7 +36,7 @@ def parse_command(argv: list[str]):
 
 
 def unit_exec_start(unit: Path) -> list[str]:
-    line = next(l for l in unit.read_text().splitlines() if l.startswith("ExecStart="))
+    line = next(s for s in unit.read_text().splitlines() if s.startswith("ExecStart="))
     return shlex.split(line.split("=", 1)[1])
 
 

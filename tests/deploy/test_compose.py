@@ -120,7 +120,7 @@ def test_long_running_services_restart_and_stop_by_sigterm():
 
 def test_every_relative_mount_exists_in_the_repository():
     for name, service in compose()["services"].items():
-        for container, host in mounts(service).items():
+        for host in mounts(service).values():
             path = host_path(host)
             assert path is None or path.exists(), f"{name}: {host}"
 
@@ -135,3 +135,13 @@ def test_the_dockerfile_copies_only_what_exists():
     sources = [line.split()[1] for line in lines if line.startswith("COPY ")]
     assert sources and all((ROOT / s).exists() for s in sources), sources
     assert any(line.startswith("USER ") and "root" not in line for line in lines)
+
+
+def test_the_image_installs_only_the_runtime_lock_checking_its_hashes():
+    lines = (DEPLOY / "Dockerfile").read_text().splitlines()
+    installs = [line for line in lines if "pip install" in line]
+    assert installs[0].split() == ["RUN", "pip", "install", "--require-hashes", "-r", "requirements/runtime.lock"]
+    assert all("--no-deps" in line and "--no-build-isolation" in line for line in installs[1:])
+    assert not any("test.lock" in line or "requirements.lock" in line for line in lines)
+    runtime = (ROOT / "requirements" / "runtime.lock").read_text()
+    assert "\npytest==" not in runtime and "\nmatplotlib==" not in runtime

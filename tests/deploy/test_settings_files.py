@@ -1,4 +1,5 @@
-"""Service settings files (`--service-config FILE.toml`): deploy/config/*.toml and the reader (services/service_config.py)."""
+"""Service settings files (`--service-config FILE.toml`): deploy/config/*.toml and the reader
+(services/service_config.py)."""
 import pytest
 
 from sharedctl.services.cli import build_parser, main

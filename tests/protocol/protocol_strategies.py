@@ -4,7 +4,9 @@ from __future__ import annotations
 from hypothesis import strategies as st
 
 from sharedctl.protocol import cansimple as cs
+from sharedctl.protocol import messages as m
 from sharedctl.protocol.odrive_enums import ODriveError
+from sharedctl.protocol.wire_types import MAX_TEXT_LEN, ROBOT_DIMS, TOKEN_PATTERN, Dims
 
 node_ids = st.integers(min_value=0, max_value=63)
 float32s = st.floats(width=32, allow_nan=False, allow_infinity=False)
@@ -38,9 +40,6 @@ can_messages = st.one_of([frames_of(cls) for cls in [*data_frame_classes, cs.Pol
 
 
 # --- Zenoh messages -------------------------------------------------------------------------------
-
-from sharedctl.protocol import messages as m  # noqa: E402
-from sharedctl.protocol.wire_types import MAX_TEXT_LEN, ROBOT_DIMS, TOKEN_PATTERN, Dims  # noqa: E402
 
 finite = st.floats(allow_nan=False, allow_infinity=False)
 unit_interval = st.floats(min_value=0.0, max_value=1.0)

@@ -269,7 +269,7 @@ def test_decoding_a_single_precision_nan_is_refused():
         decode_message(nan32)
 
 
-# --- malformed and oversized payloads --------------------------------------------------------------------------------------
+# --- malformed and oversized payloads -------------------------------------------------------------------------------
 
 def test_empty_payload_is_malformed():
     with pytest.raises(MalformedPayload):

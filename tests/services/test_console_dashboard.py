@@ -1,7 +1,6 @@
 """The dashboard renders telemetry to text without a terminal."""
 from collections import deque
 
-import numpy as np
 import pytest
 
 from sharedctl.protocol.messages import (

@@ -3,7 +3,6 @@ import os
 import signal
 import subprocess
 import sys
-import threading
 import time
 
 import numpy as np
@@ -42,7 +41,8 @@ def console_run():
     received = []
     sub = session.declare_subscriber(
         keys.operator_cmd_key("robot1"),
-        lambda s: received.append((time.monotonic(), decode_message(s.payload.to_bytes(), ROBOT_DIMS, expect=OperatorCommand))))
+        lambda s: received.append((time.monotonic(),
+                                   decode_message(s.payload.to_bytes(), ROBOT_DIMS, expect=OperatorCommand))))
     pub = session.declare_publisher(keys.state_key("robot1"))
     lease_requests = []
 
@@ -80,8 +80,9 @@ def console_run():
         pub.undeclare()
         queryable.undeclare()
         session.close()
-    return {"lease_requests": lease_requests, "commands": [c for _, c in received], "arrivals": [a for a, _ in received], "exit": proc.returncode,
-            "stop_seconds": stop_seconds, "output": output, "pid": proc.pid}
+    return {"lease_requests": lease_requests, "commands": [c for _, c in received],
+            "arrivals": [a for a, _ in received], "exit": proc.returncode, "stop_seconds": stop_seconds,
+            "output": output, "pid": proc.pid}
 
 
 def test_the_console_sends_commands_once_telemetry_arrives(console_run):

@@ -1,18 +1,24 @@
 """Operator commands wait in a Zenoh channel; the loop thread takes, queues and judges them
-(services/controller/command_intake.py, daemon.py `apply_commands`), in arrival order, and before
+(services/controller/command_intake.py, zenoh_links.py `apply_commands`), in arrival order, and before
 any lease query is answered; the warm-up before the clock starts changes nothing."""
 import time
 
 import numpy as np
+import pytest
 import zenoh
 
 from sharedctl.protocol.messages import ControlRequest, LeaseAction, LeaseReply, LeaseRequest, OperatorCommand
 from sharedctl.protocol.msgpack_codec import decode_message, encode_message
 from sharedctl.services.controller import command_intake
 
-from .test_controller_loop import arm, daemon, feed  # noqa: F401 — the fixture
+from .test_controller_loop import arm, feed, make_daemon
 
 Q0 = (-0.9, 3.0, 0.0)
+
+
+@pytest.fixture
+def daemon():
+    return make_daemon()
 
 
 class Payload:
@@ -43,7 +49,7 @@ def command(seq, joystick=(0.0, 0.2, 0.0), operator_id="op"):
         qd_d=(0.0, 0.0, 0.0), qdd_d=(0.0, 0.0, 0.0), deadman=True, estop=False, control_request=ControlRequest.NONE))
 
 
-def test_a_received_command_is_queued_and_judged_at_the_next_tick(daemon):  # noqa: F811
+def test_a_received_command_is_queued_and_judged_at_the_next_tick(daemon):
     arm(daemon)
     daemon.intake.queue(Sample(command(1)))
     assert daemon.policy.accepted == 0 and len(daemon.intake.pending) == 1
@@ -53,7 +59,7 @@ def test_a_received_command_is_queued_and_judged_at_the_next_tick(daemon):  # no
     assert daemon.out.u_h[1] > 0.0                       # the queued command drove this very tick
 
 
-def test_commands_waiting_in_the_channel_are_taken_in_order_by_the_loop(daemon):  # noqa: F811
+def test_commands_waiting_in_the_channel_are_taken_in_order_by_the_loop(daemon):
     channel = daemon.session.subscriptions["sharedctl/v1/unit/operator/cmd"]
     assert isinstance(channel.handler, zenoh.handlers.FifoChannel)      # no Python callback thread
     channel.samples += [Sample(command(seq)) for seq in (1, 2, 4, 3)]   # 3 after 4: out of order
@@ -65,7 +71,7 @@ def test_commands_waiting_in_the_channel_are_taken_in_order_by_the_loop(daemon):
     assert sum(daemon.policy.rejections.values()) == 1
 
 
-def test_queued_commands_are_judged_in_arrival_order(daemon):  # noqa: F811
+def test_queued_commands_are_judged_in_arrival_order(daemon):
     for seq in (1, 3, 2):                                # 2 arrives after 3: out of order
         daemon.intake.queue(Sample(command(seq)))
     with daemon.lock:
@@ -74,25 +80,25 @@ def test_queued_commands_are_judged_in_arrival_order(daemon):  # noqa: F811
     assert sum(daemon.policy.rejections.values()) == 1
 
 
-def test_a_bad_payload_is_still_counted_as_rejected(daemon):  # noqa: F811
+def test_a_bad_payload_is_still_counted_as_rejected(daemon):
     daemon.intake.queue(Sample(b"\x00not msgpack"))
     with daemon.lock:
         daemon.apply_commands()
     assert daemon.policy.accepted == 0 and daemon.policy.rejected == 1
 
 
-def test_a_lease_query_is_answered_after_the_commands_that_arrived_before_it(daemon):  # noqa: F811
+def test_a_lease_query_is_answered_after_the_commands_that_arrived_before_it(daemon):
     """Implicit lease: a command takes the free lease; the holder's release that follows must find it held."""
     daemon.intake.queue(Sample(command(1)))
     request = encode_message(LeaseRequest(operator_id="op", session_id="s", seq=1, time=time.time(),
                                           action=LeaseAction.RELEASE))
     query = Query(request)
-    daemon._on_lease_query(query)
+    daemon.links.on_lease_query(query)
     assert daemon.policy.accepted == 1 and not daemon.intake.pending
     assert query.replies[0].granted and daemon.policy.lease.holder_id is None
 
 
-def test_a_full_queue_refuses_and_counts_the_overflow(daemon, monkeypatch):  # noqa: F811
+def test_a_full_queue_refuses_and_counts_the_overflow(daemon, monkeypatch):
     monkeypatch.setattr(command_intake, "MAX_PENDING", 3)
     for seq in range(1, 6):
         daemon.intake.queue(Sample(command(seq)))
@@ -102,7 +108,7 @@ def test_a_full_queue_refuses_and_counts_the_overflow(daemon, monkeypatch):  # n
     assert daemon.policy.rejections["command_queue_full"] == 2
 
 
-def test_the_warm_up_sends_nothing_and_keeps_every_state(daemon):  # noqa: F811
+def test_the_warm_up_sends_nothing_and_keeps_every_state(daemon):
     state, q = daemon.state, daemon.q.copy()
     before = (daemon.policy.accepted, daemon.odometry.updates, daemon.state_seq, daemon.mode)
     daemon.warm_up()

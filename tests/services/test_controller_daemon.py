@@ -9,7 +9,6 @@ The daemon runs as a subprocess; each test reaps it (terminate → wait → kill
 from __future__ import annotations
 
 import math
-import os
 import signal
 import socket
 import subprocess
@@ -29,6 +28,7 @@ from sharedctl.protocol.messages import ControlRequest, Event, OperatorCommand, 
 from sharedctl.protocol.msgpack_codec import decode_message, encode_message
 from sharedctl.protocol.odrive_enums import AxisState, ControlMode, InputMode, ODriveError
 from sharedctl.services import can_bus, zenoh_session
+from sharedctl.services.summary_output import read_json
 
 from .processes import reap, wait_for
 
@@ -71,7 +71,8 @@ class FakeRobot(threading.Thread):
     # -- recording helpers
     def frames(self, kind, node=None, since=0.0):
         with self.lock:
-            return [(t, f) for t, f in self.log if isinstance(f, kind) and t >= since and (node is None or f.node_id == node)]
+            return [(t, f) for t, f in self.log
+                    if isinstance(f, kind) and t >= since and (node is None or f.node_id == node)]
 
     def q_at(self, wall_time: float) -> np.ndarray:
         """The plant's pose at a wall-clock time (interpolated)."""
@@ -172,19 +173,22 @@ def robot():
 RELAXED_FEEDBACK = ("--feedback-timeout-ms", "300")
 
 
-def start_daemon(port: int, zenoh_port: int, *extra: str) -> subprocess.Popen:
+def start_daemon(port: int, zenoh_port: int, summary_path, *extra: str) -> subprocess.Popen:
+    """The daemon as a process; its exit summary goes to `summary_path` (`--json`), kept as `proc.summary_path`."""
     cmd = [sys.executable, "-m", "sharedctl.services.cli", "controller", "--can-interface", "udp_multicast",
            "--can-option", f"port={port}", "--zenoh-listen", f"tcp/127.0.0.1:{zenoh_port}", "--robot-id", "testbot",
-           "--quiet", *(extra or RELAXED_FEEDBACK)]
-    return subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+           "--quiet", "--json", str(summary_path), *(extra or RELAXED_FEEDBACK)]
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    proc.summary_path = summary_path
+    return proc
 
 
 @pytest.fixture
-def daemon_factory():
+def daemon_factory(tmp_path):
     started: list[subprocess.Popen] = []
 
     def factory(port, zenoh_port, *extra):
-        proc = start_daemon(port, zenoh_port, *extra)
+        proc = start_daemon(port, zenoh_port, tmp_path / f"controller{len(started)}.json", *extra)
         started.append(proc)
         return proc
 
@@ -231,7 +235,8 @@ def test_sigterm_stops_within_2_s_with_zero_torque_and_idle_to_every_axis(robot,
         assert any(isinstance(f, cs.SetInputTorque) and f.input_torque == 0.0 for f in after)
         assert isinstance(after[-1], cs.SetAxisState) and after[-1].requested_state is AxisState.IDLE
         assert robot.state[n] is AxisState.IDLE
-    assert "stopped after" in out and "deadlines" in out and "CPU" in out
+    summary = read_json(proc.summary_path)                # the exit summary, as JSON
+    assert summary["ticks"] > 0 and summary["missed"] >= 0 and summary["jitter_p99_us"] > 0
 
 
 def test_can_silence_after_arming_estops_every_axis_and_stops_commanding(robot, daemon_factory):
@@ -248,7 +253,7 @@ def test_can_silence_after_arming_estops_every_axis_and_stops_commanding(robot, 
     assert proc.poll() is None                          # estopped, still running (telemetry, re-arm)
     elapsed, out, _ = sigterm_and_wait(proc)
     assert proc.returncode == 0 and elapsed < 2.0
-    assert "estops 1" in out
+    assert read_json(proc.summary_path)["estops"] == 1
 
 
 def test_operator_commands_drive_the_robot_and_telemetry_reports_them(robot, daemon_factory):
@@ -306,4 +311,5 @@ def test_operator_commands_drive_the_robot_and_telemetry_reports_them(robot, dae
         session.close()
     elapsed, out, _ = sigterm_and_wait(proc)
     assert proc.returncode == 0 and elapsed < 2.0
-    assert "1 rejected" in out and "estops 1" in out
+    summary = read_json(proc.summary_path)
+    assert sum(summary["rejections"].values()) == 1 and summary["estops"] == 1     # the malformed message; the estop

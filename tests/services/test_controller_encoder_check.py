@@ -5,7 +5,6 @@ import struct
 import pytest
 
 from sharedctl.services.controller.encoder_check import EncoderCheck
-from sharedctl.services.controller.odometry import AxisEstimate
 
 CHECK = EncoderCheck()
 PERIOD = 0.002

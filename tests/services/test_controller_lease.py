@@ -121,6 +121,7 @@ def test_a_replayed_release_does_nothing():
 
 def test_a_malformed_query_gets_a_refusal_not_an_exception():
     lease, guard, rejections = OperatorLease(), ReplayGuard(), Counter()
-    for junk in (b"", b"\xc1", encode_message(LeaseReply(request_seq=1, time=1.0, granted=True, holder=None, reason=""))):
+    for junk in (b"", b"\xc1",
+                 encode_message(LeaseReply(request_seq=1, time=1.0, granted=True, holder=None, reason=""))):
         assert not ask(lease, guard, rejections, junk, 0.0).granted
     assert sum(rejections.values()) == 3 and all(k.startswith("lease_") for k in rejections)

@@ -84,13 +84,18 @@ def message(frame):
     return can.Message(arbitration_id=f.arbitration_id, data=f.data, dlc=f.dlc, is_extended_id=False)
 
 
-@pytest.fixture
-def daemon():
+def make_daemon():
+    """The paper_convex CE daemon on an in-memory bus and session, its CAN master's clock at 10 s."""
     loop, q0, _ = load("paper_convex").closed_loop("ce")
     d = ControllerDaemon(DaemonConfig(robot_id="unit", verbose=False), loop, q0, MemoryBus(), MemorySession())
     d.master.clock = lambda: d.clock_now
     d.clock_now = 10.0
     return d
+
+
+@pytest.fixture
+def daemon():
+    return make_daemon()
 
 
 def feed(d, now, state=AxisState.CLOSED_LOOP_CONTROL, error=ODriveError.NONE, v_turns=(0.0, 0.0, 0.0), heartbeat=True):
@@ -214,7 +219,7 @@ def test_robot_state_is_published_with_the_link_health(daemon):
     operator(daemon, 1, 10.003, joystick=(0.0, 0.25, 0.0))
     feed(daemon, 10.004, heartbeat=False)
     daemon.tick(10.005)
-    daemon.publish_state(10.005)
+    daemon.telemetry.publish_state(10.005)
     state = decode_message(daemon.session.publishers["sharedctl/v1/unit/state"].payloads[-1], expect=RobotState)
     assert state.u_h == pytest.approx((0.0, 5.0, 0.0)) and state.lease_holder == "op"
     assert state.link.staleness_ms == pytest.approx(2.0) and state.link.can_feedback_age_ms == pytest.approx(1.0)
@@ -222,50 +227,51 @@ def test_robot_state_is_published_with_the_link_health(daemon):
 
 
 def test_robot_state_in_three_stages_sends_what_was_captured_in_its_first(daemon):
-    """telemetry_stage 0 captures (and works out q_r), 1 builds, 2 puts: one message, with the values of the
-    period that captured it, whatever the ticks between the stages change; the same as publish_state's."""
+    """A RobotState's stage 0 captures (and works out q_r), 1 builds, 2 puts (telemetry_schedule.py): one message,
+    with the values of the period that captured it, whatever the ticks between the stages change; the same as
+    publish_state's."""
     states = daemon.session.publishers["sharedctl/v1/unit/state"].payloads
     arm(daemon)
     operator(daemon, 1, 10.003, joystick=(0.0, 0.25, 0.0))
     feed(daemon, 10.004, heartbeat=False)
     daemon.tick(10.005)
-    daemon.publish_state(10.005)
+    daemon.telemetry.publish_state(10.005)
     at_once = decode_message(states[-1], expect=RobotState)
-    daemon.telemetry_stage(0, 10.005)
+    daemon.telemetry.stage(0, 10.005)
     operator(daemon, 2, 10.006, joystick=(0.5, 0.0, 0.0))         # the next period: another command, another u_h
     feed(daemon, 10.006, heartbeat=False)
     daemon.tick(10.007)
-    daemon.telemetry_stage(1, 10.007)
+    daemon.telemetry.stage(1, 10.007)
     sent = len(states)
-    daemon.telemetry_stage(2, 10.009)
+    daemon.telemetry.stage(2, 10.009)
     assert len(states) == sent + 1
     staged = decode_message(states[-1], expect=RobotState)
     assert staged.seq == at_once.seq + 1 and staged.u_h == pytest.approx((0.0, 5.0, 0.0))
     assert staged.q_ref == pytest.approx(at_once.q_ref, nan_ok=True)
     assert staged.wheel_torques == pytest.approx(at_once.wheel_torques) and daemon.u_s.tolist() != list(staged.u_s)
-    daemon.telemetry_stage(2, 10.011)                                # nothing built since: nothing sent
+    daemon.telemetry.stage(2, 10.011)                                # nothing built since: nothing sent
     assert len(states) == sent + 1
 
 
 def test_robot_state_and_heartbeats_go_out_at_their_rates_on_the_clock_whatever_the_loop_rate(daemon):
-    """`telemetry` and `heartbeats`, once a period: 50 RobotStates and one Heartbeat a second whether the loop
-    ticks at 500 Hz or, missing every other deadline, at 250 Hz (a count of ticks would halve both); every
-    RobotState whole and in sequence."""
+    """`states` and `heartbeats` (telemetry_schedule.py), once a period: 50 RobotStates and one Heartbeat a second
+    whether the loop ticks at 500 Hz or, missing every other deadline, at 250 Hz (a count of ticks would halve
+    both); every RobotState whole and in sequence."""
     states = daemon.session.publishers["sharedctl/v1/unit/state"].payloads
     beats = daemon.session.publishers["sharedctl/v1/unit/alive/controller"].payloads
     arm(daemon)
     for start, period in ((20.0, 0.002), (30.0, 0.004)):
         sent, beat = len(states), len(beats)
         for k in range(round(3.0 / period)):
-            daemon.telemetry(start + k * period)
-            daemon.heartbeats(start + k * period)
+            daemon.telemetry.states(start + k * period)
+            daemon.telemetry.heartbeats(start + k * period)
         assert len(states) - sent in (149, 150, 151) and len(beats) - beat == 3
     seqs = [decode_message(p, expect=RobotState).seq for p in states]
     assert seqs == list(range(1, len(seqs) + 1))
 
 
 def test_a_robot_state_stage_that_fails_is_reported_and_its_message_dropped(daemon, monkeypatch):
-    from sharedctl.services.controller import daemon as daemon_module
+    from sharedctl.services.controller import telemetry_schedule
 
     states = daemon.session.publishers["sharedctl/v1/unit/state"].payloads
     arm(daemon)
@@ -273,9 +279,9 @@ def test_a_robot_state_stage_that_fails_is_reported_and_its_message_dropped(daem
     def broken(*args):
         raise ValueError("no state")
 
-    monkeypatch.setattr(daemon_module, "robot_state", broken)
+    monkeypatch.setattr(telemetry_schedule, "robot_state", broken)
     for stage in range(3):
-        daemon.telemetry_stage(stage, 10.003 + 0.002 * stage)
+        daemon.telemetry.stage(stage, 10.003 + 0.002 * stage)
     assert states == [] and any("RobotState not sent: ValueError: no state" in e.text for e in events(daemon))
 
 
@@ -314,35 +320,35 @@ def test_a_tick_whose_estimates_are_late_waits_for_them_and_no_longer(daemon):
     daemon.await_estimates()
     assert daemon.master.estimates_since(daemon.last_tick_at)
     assert daemon.clock_now == pytest.approx(10.0003)
-    assert (daemon.sensor_waits, daemon.sensor_wait_timeouts) == (1, 0)
+    assert (daemon.stats.sensor_waits, daemon.stats.sensor_waits_in_vain) == (1, 0)
     # estimates later than the wait: the tick goes on with the ones it has after `sensor_wait`
     daemon.last_tick_at = daemon.clock_now
     daemon.master.bus.queue.append((daemon.clock_now + 0.0009, message(cs.GetEncoderEstimates(0, 0.0, 0.0))))
     start = daemon.clock_now
     daemon.await_estimates()
     assert daemon.clock_now - start == pytest.approx(daemon.config.sensor_wait)
-    assert (daemon.sensor_waits, daemon.sensor_wait_timeouts) == (2, 1)
+    assert (daemon.stats.sensor_waits, daemon.stats.sensor_waits_in_vain) == (2, 1)
 
 
 def test_no_wait_when_the_estimates_are_there_or_the_drives_send_slower_than_the_loop(daemon):
     running_with_drives_every(daemon, PERIOD)
     feed(daemon, 10.0, heartbeat=False)          # this period's set arrived before the tick
     daemon.await_estimates()
-    assert daemon.sensor_waits == 0 and daemon.clock_now == 10.0
-    slow = ControllerDaemon(DaemonConfig(robot_id="unit", verbose=False, rate=1000.0), *load("paper_convex").closed_loop("ce")[:2],
-                            MemoryBus(), MemorySession())
+    assert daemon.stats.sensor_waits == 0 and daemon.clock_now == 10.0
+    slow = ControllerDaemon(DaemonConfig(robot_id="unit", verbose=False, rate=1000.0),
+                            *load("paper_convex").closed_loop("ce")[:2], MemoryBus(), MemorySession())
     slow.master.clock = lambda: slow.clock_now
     slow.clock_now = 10.0
     running_with_drives_every(slow, 2 * slow.period)   # 500 Hz drives, 1 kHz loop: every other tick has none
     slow.await_estimates()
-    assert slow.sensor_waits == 0 and slow.clock_now == 10.0
+    assert slow.stats.sensor_waits == 0 and slow.clock_now == 10.0
     free = ControllerDaemon(DaemonConfig(robot_id="unit", verbose=False, sensor_sync=False),
                             *load("paper_convex").closed_loop("ce")[:2], MemoryBus(), MemorySession())
     free.master.clock = lambda: free.clock_now
     free.clock_now = 10.0
     running_with_drives_every(free, PERIOD)
     free.await_estimates()
-    assert free.sensor_waits == 0 and free.clock_now == 10.0
+    assert free.stats.sensor_waits == 0 and free.clock_now == 10.0
 
 
 def test_sensor_to_torque_runs_from_the_oldest_estimate_used_to_the_torque_frames(daemon):
@@ -353,9 +359,10 @@ def test_sensor_to_torque_runs_from_the_oldest_estimate_used_to_the_torque_frame
     feed(daemon, start - 0.0008, heartbeat=False)       # estimates that arrived 0.8 ms before the tick
     daemon.clock_now = start
     daemon.tick(start)
-    assert daemon.sensor_to_torque.n == 1 and daemon.torque_out.n == 1
-    age = daemon.sensor_to_torque.quantile(0.5)
-    assert 0.0008 <= age <= 0.0008 + daemon.torque_out.quantile(0.5) + 1e-5
+    stats = daemon.stats
+    assert stats.sensor_to_torque.n == 1 and stats.torque_out.n == 1
+    age = stats.sensor_to_torque.quantile(0.5)
+    assert 0.0008 <= age <= 0.0008 + stats.torque_out.quantile(0.5) + 1e-5
 
 
 def test_with_torque_at_the_torque_frames_leave_that_long_after_the_ticks_deadline(daemon):
@@ -380,13 +387,13 @@ def test_by_default_the_torques_leave_as_soon_as_computed():
 
 
 def test_a_tick_reports_when_its_torques_were_ready_apart_from_when_they_left(daemon, monkeypatch):
-    """The summary's "torques computed" is taken before the output instant holds the frames, "torque out"
+    """The statistics' "torques ready" point comes before the output instant holds the frames, "torques sent"
     after they left: at the hold, the one is counted and the other not yet (no clock involved)."""
     from sharedctl.services.controller import daemon as daemon_module
 
     at_hold = []
     monkeypatch.setattr(daemon_module, "poll_until", lambda t: at_hold.append(
-        (daemon.torque_ready.n, daemon.torque_out.n, t, len(daemon.master.bus.take()))))
+        (daemon.stats.torque_ready.n, daemon.stats.torque_out.n, t, len(daemon.master.bus.take()))))
     arm(daemon)
     daemon.config.torque_at = 0.02
     daemon.deadline = 10.002
@@ -396,7 +403,7 @@ def test_a_tick_reports_when_its_torques_were_ready_apart_from_when_they_left(da
     assert daemon.mode is Mode.RUNNING
     # ready counted, out not yet, nothing sent yet; the hold asked for deadline + torque_at
     assert at_hold == [(1, 0, pytest.approx(10.022), 0)]
-    assert (daemon.torque_ready.n, daemon.torque_out.n) == (1, 1) and len(daemon.master.bus.take()) == 3
+    assert (daemon.stats.torque_ready.n, daemon.stats.torque_out.n) == (1, 1) and len(daemon.master.bus.take()) == 3
 
 
 @pytest.mark.processes    # on the real clock: run alone, not beside the test workers
@@ -419,7 +426,7 @@ def test_the_loop_puts_a_busy_overrun_down_to_work_and_a_sleeping_one_to_not_run
             time.sleep(0.01)
         tick(now)
 
-    causes = daemon.miss_causes
+    causes = daemon.stats.miss_causes
     noted = {}                       # tick number → the cause its first miss was put down to
     note = causes.note
 
@@ -428,17 +435,18 @@ def test_the_loop_puts_a_busy_overrun_down_to_work_and_a_sleeping_one_to_not_run
         note(n, *args, **kwargs)
         after = (causes.woke_late, causes.not_run, causes.working)
         if after != before:
-            noted.setdefault(count[0], ("woke_late", "not_run", "working")[[a > b for a, b in zip(after, before)].index(True)])
+            noted.setdefault(count[0],
+                             ("woke_late", "not_run", "working")[[a > b for a, b in zip(after, before)].index(True)])
 
     causes.note = spying_note
     daemon.tick = stalling_tick
     summary = daemon.run(Stop())
     assert noted.get(60) == "working" and noted.get(120) == "not_run"
-    assert summary.misses_working == causes.working and summary.missed + summary.late == (
+    assert summary["misses_working"] == causes.working and summary["missed"] + summary["late"] == (
         causes.woke_late + causes.not_run + causes.working)
-    times = [t for t, _ in summary.miss_times]
-    assert {"working", "not running"} <= {cause for _, cause in summary.miss_times}
-    assert times == sorted(times) and 0.0 < times[0] < summary.elapsed
+    times = [m["t_s"] for m in summary["miss_times"]]
+    assert {"working", "not running"} <= {m["cause"] for m in summary["miss_times"]}
+    assert times == sorted(times) and 0.0 < times[0] < summary["elapsed_s"]
 
 
 def test_the_frames_queued_before_the_clock_and_the_first_heartbeat_are_not_the_first_periods_work(daemon):
@@ -456,13 +464,31 @@ def test_the_frames_queued_before_the_clock_and_the_first_heartbeat_are_not_the_
         read_at.append(daemon.deadline)
         return queued.pop(0)
 
-    alive = daemon.alive_pub
+    alive = daemon.links.alive_pub
     put = alive.put
     alive.put = lambda payload: (put_at.append(daemon.deadline), put(payload))
     daemon.master.bus.recv = recv
     daemon.master.clock = time.monotonic
     daemon.config.duration = 0.03
     summary = daemon.run(Stop())
-    assert summary.ticks > 0 and daemon.master.rx_frames == 40
+    assert summary["ticks"] > 0 and daemon.master.rx_frames == 40
     assert read_at == [None] * 40
     assert put_at == [None]                           # one heartbeat a second: the first went out before the clock
+
+
+def test_the_loops_summary_holds_every_figure_the_bench_reports_and_is_strict_json(daemon, tmp_path):
+    """run() on the real clock for 30 ms: its summary, written as the controller's `--json` file and read back by
+    the bench (services/studies/bench/stack_run.py), has a value for every figure the bench reports."""
+    from sharedctl.services.studies.bench.stack_run import DAEMON_KEYS, daemon_summary
+    from sharedctl.services.summary_output import write_json
+
+    class Stop:
+        stopped = False
+
+    daemon.master.clock = time.monotonic
+    daemon.config.duration = 0.03
+    summary = daemon.run(Stop())
+    write_json(tmp_path / "controller.json", summary)
+    figures = daemon_summary(tmp_path / "controller.json")
+    assert [key for key in DAEMON_KEYS if figures[key] is None] == []
+    assert figures["ticks"] == summary["ticks"] > 0 and figures["frames_rx"] == 0 and summary["mode"] == "arming"

@@ -1,5 +1,6 @@
 """Wheel odometry (services/controller/odometry.py) against the omnidirectional robot model."""
 import math
+import random
 
 import numpy as np
 import pytest
@@ -10,9 +11,14 @@ from sharedctl.services.controller.odometry import TWO_PI, AxisEstimate, WheelOd
 MODEL = OmniRobot()
 
 
+def wheel_speeds(q, v):
+    """ω = B(ψ)ᵀ q̇ with the printed B(ψ) (`input_matrix`), not the closed form the odometry uses."""
+    return MODEL.input_matrix(q).T @ v
+
+
 def encoder_estimates(q, v, wheel_turns, t):
     """What the drives report for body velocity v at pose q: ω = Bᵀq̇ as turns/s."""
-    omega = MODEL.wheel_speeds(q, v)
+    omega = wheel_speeds(q, v)
     return [AxisEstimate(float(p), float(w / TWO_PI), t) for p, w in zip(wheel_turns, omega)]
 
 
@@ -50,7 +56,7 @@ def drive_circle(source, steps=2000, dt=0.002):
         odo.update(encoder_estimates(truth(t), velocity(t), phi / TWO_PI, t))
         for j in range(fine):  # midpoint rule for the next dt
             s = t + (j + 0.5) * h
-            phi += h * MODEL.wheel_speeds(truth(s), velocity(s))
+            phi += h * wheel_speeds(truth(s), velocity(s))
     return odo.q, truth(steps * dt)
 
 
@@ -79,3 +85,34 @@ def test_a_wheel_position_jump_is_a_discontinuity_not_a_motion():
     q, _ = odo.update(encoder_estimates(q0, np.zeros(3), np.zeros(3), 0.002))   # drive restarted at 0 turns
     np.testing.assert_array_equal(q, q0)
     assert odo.discontinuities == 1
+
+
+class SolvedWheelMap:
+    """q̇ = B(ψ)⁻ᵀ ω by a numpy solve of the printed B(ψ): a reference for the closed form."""
+
+    def body_velocity(self, q, w):
+        v = np.linalg.solve(MODEL.input_matrix(np.array(q)).T, np.array(w))
+        return float(v[0]), float(v[1]), float(v[2])
+
+
+@pytest.mark.parametrize("source", ["position", "velocity"])
+def test_odometry_on_the_closed_form_equals_the_odometry_on_numpy_solves(source):
+    """Random wheel motion (with a drive restart in the middle): both pose and velocity agree to rounding."""
+    rng = random.Random(5)
+    fast = WheelOdometry(MODEL, np.array([-0.9, 3.0, 0.4]), source=source)
+    reference = WheelOdometry(MODEL, np.array([-0.9, 3.0, 0.4]), source=source)
+    reference.wheel_map = SolvedWheelMap()
+    pos, t = [0.0, 0.0, 0.0], 0.0
+    for k in range(1500):
+        vel = [1.0 + rng.uniform(-3, 3) for _ in range(3)]      # equal wheel speeds turn the robot
+        pos = [p + v * 0.002 for p, v in zip(pos, vel)]
+        if k == 700:
+            pos = [p + 5.0 for p in pos]               # a jump of 5 turns (a drive reset): a discontinuity
+        t += 0.002
+        estimates = [AxisEstimate(p, v, t) for p, v in zip(pos, vel)]
+        q_fast, v_fast = fast.update(estimates)
+        q_ref, v_ref = reference.update(estimates)
+        np.testing.assert_allclose(q_fast, q_ref, rtol=1e-12, atol=1e-12)
+        np.testing.assert_allclose(v_fast, v_ref, rtol=1e-12, atol=1e-12)
+    assert fast.discontinuities == reference.discontinuities == 1
+    assert abs(fast.q[2] - 0.4) > 0.01                          # the pose did move

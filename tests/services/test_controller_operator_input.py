@@ -30,7 +30,7 @@ def test_fresh_command_gives_the_spring_force_intent_and_wish():
     op, status = policy.operator_input(10.1, POSE)
     d = np.array([0.5, -0.25, 0.1])
     np.testing.assert_allclose(op.force, KP * d)                       # (44)
-    assert op.intent == pytest.approx(0.5 * np.sum(KP * d * d))        # (45)
+    assert op.intent == pytest.approx(3.15)        # (45): ½(20·0.5² + 20·0.25² + 5·0.1²), by hand
     np.testing.assert_allclose(op.desired.q, [-0.5, 2.0, 0.0])
     np.testing.assert_allclose(op.desired.q_dot, [0.1, 0.2, 0.0])
     np.testing.assert_allclose(op.desired.q_ddot, [0.0, 0.01, 0.0])

@@ -23,6 +23,7 @@ from sharedctl.protocol.messages import ControlRequest, Event, GroundTruth, Oper
 from sharedctl.protocol.msgpack_codec import decode_message, encode_message
 from sharedctl.protocol.odrive_enums import AxisState
 from sharedctl.services import can_bus, zenoh_session
+from sharedctl.services.summary_output import read_json
 
 from .processes import reap
 from .processes import wait_for as _wait_for
@@ -63,10 +64,12 @@ class BusListener(threading.Thread):
                 self.log.append((time.monotonic(), frame))
 
     def armed(self) -> bool:
-        return all(n in self.heartbeats and self.heartbeats[n].axis_state is AxisState.CLOSED_LOOP_CONTROL for n in NODES)
+        return all(n in self.heartbeats and self.heartbeats[n].axis_state is AxisState.CLOSED_LOOP_CONTROL
+                   for n in NODES)
 
     def frames(self, kind, node=None, since=0.0):
-        return [(t, f) for t, f in list(self.log) if isinstance(f, kind) and t >= since and (node is None or f.node_id == node)]
+        return [(t, f) for t, f in list(self.log)
+                if isinstance(f, kind) and t >= since and (node is None or f.node_id == node)]
 
     def stop(self) -> None:
         self._halt.set()
@@ -79,7 +82,7 @@ def wait_for(predicate, timeout: float, what: str) -> None:
 
 
 @pytest.fixture
-def system():
+def system(tmp_path):
     port, z_robot, z_ctrl = free_udp_port(), zenoh_session.free_loopback_port(), zenoh_session.free_loopback_port()
     can_args = ["--can-interface", "udp_multicast", "--can-option", f"port={port}", "--robot-id", "itest"]
     cli = [sys.executable, "-m", "sharedctl.services.cli"]
@@ -90,9 +93,11 @@ def system():
         subprocess.Popen(["nice", "-n", "-10", *cli, "robot", *can_args, "--zenoh-listen", f"tcp/127.0.0.1:{z_robot}"],
                          stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True),
         subprocess.Popen(cli + ["controller", *can_args, "--zenoh-listen", f"tcp/127.0.0.1:{z_ctrl}", "--quiet",
-                                "--feedback-timeout-ms", "150"],   # the robot runs unprivileged on a busy host
+                                "--feedback-timeout-ms", "150",    # the robot runs unprivileged on a busy host
+                                "--json", str(tmp_path / "controller.json")],
                          stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True),
     ]
+    procs[1].summary_path = tmp_path / "controller.json"
     session = zenoh_session.open_session(connect=[f"tcp/127.0.0.1:{z_robot}", f"tcp/127.0.0.1:{z_ctrl}"])
     try:
         yield procs[0], procs[1], session, listener
@@ -107,9 +112,12 @@ def test_controller_drives_the_simulated_robot_estops_when_it_goes_silent_and_st
     states: list[RobotState] = []
     truths: list[GroundTruth] = []
     events: list[Event] = []
-    session.declare_subscriber(keys.state_key("itest"), lambda s: states.append(decode_message(s.payload.to_bytes(), expect=RobotState)))
-    session.declare_subscriber(keys.truth_key("itest"), lambda s: truths.append(decode_message(s.payload.to_bytes(), expect=GroundTruth)))
-    session.declare_subscriber(keys.events_key("itest"), lambda s: events.append(decode_message(s.payload.to_bytes(), expect=Event)))
+    session.declare_subscriber(keys.state_key("itest"),
+                               lambda s: states.append(decode_message(s.payload.to_bytes(), expect=RobotState)))
+    session.declare_subscriber(keys.truth_key("itest"),
+                               lambda s: truths.append(decode_message(s.payload.to_bytes(), expect=GroundTruth)))
+    session.declare_subscriber(keys.events_key("itest"),
+                               lambda s: events.append(decode_message(s.payload.to_bytes(), expect=Event)))
     pub = session.declare_publisher(keys.operator_cmd_key("itest"))
 
     wait_for(listener.armed, 20.0, "the robot's three axes in CLOSED_LOOP_CONTROL")
@@ -147,4 +155,22 @@ def test_controller_drives_the_simulated_robot_estops_when_it_goes_silent_and_st
         after = [f for _, f in listener.frames((cs.SetInputTorque, cs.SetAxisState), n, since=t_term)]
         assert any(isinstance(f, cs.SetInputTorque) and f.input_torque == 0.0 for f in after)
         assert isinstance(after[-1], cs.SetAxisState) and after[-1].requested_state is AxisState.IDLE
-    assert "stopped after" in out
+    assert read_json(controller.summary_path)["estops"] == 1          # the one when the robot went silent
+
+
+def test_the_controllers_json_summary_counts_its_ticks_missed_deadlines_and_jitter(system):
+    """Two seconds with the robot, then SIGTERM: every deadline of the run was either ticked or skipped
+    (ticks + missed ≈ elapsed × 500 Hz), the lateness quantiles are ordered, and the drives' frames were read."""
+    robot, controller, _, listener = system
+    wait_for(listener.armed, 20.0, "the robot's three axes in CLOSED_LOOP_CONTROL")
+    time.sleep(2.0)
+    controller.send_signal(signal.SIGTERM)
+    _, err = controller.communicate(timeout=5)
+    assert controller.returncode == 0, err
+    summary = read_json(controller.summary_path)
+    deadlines = summary["elapsed_s"] * 500.0
+    assert summary["elapsed_s"] > 2.0 and abs(summary["ticks"] + summary["missed"] - deadlines) < 0.05 * deadlines + 10
+    assert summary["rate_hz"] == pytest.approx(summary["ticks"] / summary["elapsed_s"])
+    assert 0.0 < summary["jitter_p50_us"] <= summary["jitter_p99_us"] <= summary["jitter_max_us"] + 10.0
+    assert summary["late"] >= 0 and summary["frames_rx"] > summary["ticks"]
+    assert 0.0 < summary["loop_cpu_p50_us"] < 2000.0 and 0.0 < summary["torque_out_p50_us"] < 2000.0

@@ -9,7 +9,6 @@ killed) and none is left. (`reference`, simulate_sampled with the model as plant
 too; it has no friction, so in the non-convex run, which ends moving, it leads by ~0.2 m.)
 """
 import json
-import os
 import signal
 import subprocess
 import sys
@@ -94,6 +93,18 @@ def test_every_process_exits_cleanly_within_2_s_of_sigterm(demo):
     for name, proc in summary["processes"].items():
         assert proc["exit_code"] == 0 and not proc["killed"], (name, proc)
         assert proc["stop_seconds"] < 2.0, (name, proc)
+
+
+def test_the_demos_json_holds_the_robots_and_the_controllers_exit_summaries(demo):
+    """Both real-time loops ran the whole scenario: the robot's physics at 1 kHz and the controller's ticks at
+    500 Hz (each deadline ticked or skipped), as their `--json` summaries say."""
+    scenario, _, summary = demo
+    robot, controller = summary["processes"]["robot"]["summary"], summary["processes"]["controller"]["summary"]
+    assert robot["physics_steps"] * 1e-3 + robot["skipped_s"] == pytest.approx(robot["elapsed_s"], abs=1e-6)
+    assert robot["elapsed_s"] > RUNS[scenario] and controller["elapsed_s"] > RUNS[scenario]
+    deadlines = 500.0 * controller["elapsed_s"]
+    assert abs(controller["ticks"] + controller["missed"] - deadlines) < 0.05 * deadlines
+    assert summary["processes"]["console"]["summary"] is None          # the console writes none
 
 
 def test_no_process_is_left_behind(demo):

@@ -1,5 +1,6 @@
 """`sharedctl demo --fault …`: an operator fault and a controller kill wired into a real run
-(the CAN gateway has its own test: with it, this run adds a fourth busy process to the host); the JSON shows what was injected, and the run is judged as services/faults/stack.py says
+(the CAN gateway has its own test: with it, this run adds a fourth busy process to the host); the JSON
+shows what was injected, and the run is judged as services/faults/stack.py says
 (0 ground-truth violations, every process not killed on purpose exits cleanly)."""
 import json
 import subprocess
@@ -16,13 +17,15 @@ FAULTS = ["operator.loss=0.3", "operator.delay_ms=200", "controller.kill_at=2"]
 def test_demo_with_faults_reports_what_was_injected(tmp_path):
     out = tmp_path / "demo.json"
     argv = [sys.executable, "-m", "sharedctl.services.cli", "demo", "--headless", "--duration", "4", "--no-reference",
-            "--feedback-timeout-ms", "150", "--json", str(out), "--log-dir", str(tmp_path / "logs"), "--fault-seed", "1"]
+            "--feedback-timeout-ms", "150", "--json", str(out), "--log-dir", str(tmp_path / "logs"),
+            "--fault-seed", "1"]
     for spec in FAULTS:
         argv += ["--fault", spec]
     proc = subprocess.run(argv, capture_output=True, timeout=120)
     summary = json.loads(out.read_text())
     assert summary["faults"] == FAULTS
-    assert summary["injected"]["not_ok"] == [] and summary["ok"] is True and proc.returncode == 0, proc.stderr.decode()[-2000:]
+    assert (summary["injected"]["not_ok"] == [] and summary["ok"] is True
+            and proc.returncode == 0), proc.stderr.decode()[-2000:]
     assert summary["violations"] == 0 and summary["truth_samples"] > 0
 
     injected = summary["injected"]
@@ -36,6 +39,9 @@ def test_demo_with_faults_reports_what_was_injected(tmp_path):
     assert injected["killed"][0]["exit_code"] == -9
     for name in ("console", "robot"):
         assert summary["processes"][name]["exit_code"] == 0
+    # the robot's exit summary is in the demo's JSON; the controller, killed, wrote none
+    assert summary["processes"]["robot"]["summary"]["physics_steps"] > 0
+    assert summary["processes"]["controller"]["summary"] is None
     for pid in [kill["pid"], *(p["pid"] for p in summary["processes"].values())]:
         assert not Path(f"/proc/{pid}").exists() or b"sharedctl" not in Path(f"/proc/{pid}/cmdline").read_bytes()
 

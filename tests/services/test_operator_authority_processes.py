@@ -150,7 +150,8 @@ def running(sys_: System, holder: Operator) -> None:
     """Re-arm (the holder's in-band take) should a starved simulator have tripped an estop earlier."""
     if sys_.latest().estop_active:
         holder.command((0.0, 0.0, 0.0), request=ControlRequest.TAKE)
-    wait_for(lambda: holder.command((0.0, 0.0, 0.0)) and not sys_.latest().estop_active, 10.0, "the controller re-armed")
+    wait_for(lambda: holder.command((0.0, 0.0, 0.0)) and not sys_.latest().estop_active, 10.0,
+             "the controller re-armed")
 
 
 def test_1_a_second_operator_cannot_take_control_while_a_lease_is_held(system):

@@ -34,8 +34,9 @@ def recorded(tmp_path_factory):
     out = tmp_path_factory.mktemp("recorded-demo")
     summary_path = out / "demo.json"
     proc = subprocess.run(
-        [sys.executable, "-m", "sharedctl.services.cli", "demo", "--duration", str(DURATION), "--record", str(out / "rec"),
-         "--no-reference", "--headless", "--json", str(summary_path), "--log-dir", str(out / "logs"), *FEEDBACK_TIMEOUT],
+        [sys.executable, "-m", "sharedctl.services.cli", "demo", "--duration", str(DURATION),
+         "--record", str(out / "rec"), "--no-reference", "--headless", "--json", str(summary_path),
+         "--log-dir", str(out / "logs"), *FEEDBACK_TIMEOUT],
         stdin=subprocess.DEVNULL, capture_output=True, text=True, timeout=120)
     assert summary_path.exists(), f"no summary: {proc.stdout}\n{proc.stderr}"
     summary = json.loads(summary_path.read_text())
@@ -96,7 +97,8 @@ def test_the_can_log_reads_with_python_can_and_decodes_with_the_dbc(recorded):
             continue
         db.decode_message(frame.arbitration_id, bytes(frame.data))
         decoded += 1
-    names = {db.get_message_by_frame_id(f.arbitration_id).name.split("_", 1)[1] for f in frames if not f.is_remote_frame}
+    names = {db.get_message_by_frame_id(f.arbitration_id).name.split("_", 1)[1]
+             for f in frames if not f.is_remote_frame}
     assert {"Get_Encoder_Estimates", "Set_Input_Torque", "Heartbeat"} <= names
     assert decoded + polls == len(frames)
     assert frames[-1].timestamp - frames[0].timestamp > DURATION   # the whole run, not a burst

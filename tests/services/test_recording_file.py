@@ -6,6 +6,7 @@ import base64
 import json
 
 import pytest
+from mcap.exceptions import McapError
 from mcap.reader import make_reader
 
 from sharedctl.protocol import keys
@@ -60,7 +61,8 @@ def test_every_message_is_recorded_as_its_json_map_on_its_key(tmp_path):
     items = [(k, encode_message(m)) for k, m in samples()]
     counts = record(tmp_path / "r.mcap", items).close()
     reader = make_reader(open(tmp_path / "r.mcap", "rb"))
-    got = [(channel.topic, json.loads(message.data)) for _, channel, message in reader.iter_messages(log_time_order=False)]
+    got = [(channel.topic, json.loads(message.data))
+           for _, channel, message in reader.iter_messages(log_time_order=False)]
     assert got == [(k, json.loads(json.dumps(to_map(m)))) for k, m in samples()]
     assert counts.messages == len(items) and counts.undecoded == 0 and counts.dropped == 0
 
@@ -140,7 +142,7 @@ def test_a_file_cut_short_reads_up_to_its_last_complete_chunk(tmp_path, where, e
            "last chunk": chunks[2].chunk_start_offset + chunks[2].chunk_length // 2,
            "second chunk": chunks[1].chunk_start_offset + chunks[1].chunk_length // 2}[where]
     (tmp_path / "cut.mcap").write_bytes(whole[:cut])
-    with pytest.raises(Exception):
+    with pytest.raises(McapError):
         make_reader(open(tmp_path / "cut.mcap", "rb")).get_summary()   # what the indexed reader makes of it
     messages, status = read_all(tmp_path / "cut.mcap")
     assert not status.complete and status.stopped_by

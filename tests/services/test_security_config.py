@@ -61,7 +61,8 @@ def test_the_ca_may_sign_and_nothing_else_is_a_ca(creds):
 
 
 def test_private_keys_and_passwords_are_readable_by_the_owner_only(creds):
-    secrets = [creds.private_key(r) for r in (*roles.ROLES, "router")] + [creds.dictionary, creds.directory / "ca-key.pem"]
+    secrets = ([creds.private_key(r) for r in (*roles.ROLES, "router")]
+               + [creds.dictionary, creds.directory / "ca-key.pem"])
     secrets += [creds.directory / f"{r}.password" for r in roles.ROLES]
     for path in secrets:
         assert stat.S_IMODE(path.stat().st_mode) == 0o600, path
@@ -238,4 +239,5 @@ def test_the_deploy_router_acl_is_the_one_the_code_builds():
     assert normal(acl["rules"], rule_fields) == normal(expected["rules"], rule_fields)
     subject_fields = ("id", "usernames", "cert_common_names")
     assert normal(acl["subjects"], subject_fields) == normal(expected["subjects"], subject_fields)
-    assert normal(acl["policies"], ("id", "rules", "subjects")) == normal(expected["policies"], ("id", "rules", "subjects"))
+    policy_fields = ("id", "rules", "subjects")
+    assert normal(acl["policies"], policy_fields) == normal(expected["policies"], policy_fields)

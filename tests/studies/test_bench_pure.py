@@ -1,6 +1,7 @@
 """The pure parts of `sharedctl bench`: bus-load arithmetic, statistics, and the analysis of a bus capture."""
 from __future__ import annotations
 
+import json
 import math
 import struct
 
@@ -14,14 +15,11 @@ from sharedctl.services.studies.bench.stack_run import Frame, analyse, analyse_t
 from sharedctl.services.studies.bench.statistics import group_bursts, missed_periods, percentiles, period_jitter
 
 
-class LoggedChild:
-    """A started process as `_daemon_summary` reads it: the tail of its log."""
-
-    def __init__(self, text):
-        self.text = text
-
-    def tail(self, lines):
-        return self.text + "\n"
+def controller_json(tmp_path, **figures):
+    """A controller's `--json` exit summary (services/controller/loop_stats.py's names), as a file."""
+    path = tmp_path / "controller.json"
+    path.write_text(json.dumps({"ticks": 10, "missed": 0, "late": 0, "miss_times": [], **figures}))
+    return path
 
 
 def test_worst_case_frame_lengths_with_bit_stuffing():
@@ -44,7 +42,8 @@ def test_dlc_outside_classic_can_is_refused():
 
 
 def test_bus_load_of_the_default_rates():
-    # 3 axes × 500 Hz encoder estimates (8 bytes) + 3 × 500 Hz torque commands (4 bytes) + 3 × 10 Hz heartbeats (8 bytes)
+    # 3 axes × 500 Hz encoder estimates (8 bytes) + 3 × 500 Hz torque commands (4 bytes)
+    # + 3 × 10 Hz heartbeats (8 bytes)
     frames = [(8, False, False)] * 1500 + [(4, False, False)] * 1500 + [(8, False, False)] * 30
     assert bus_load(frames, 1.0) == pytest.approx((1530 * 135 + 1500 * 95) / 1e6)
     assert bus_load(frames, 2.0) == pytest.approx(bus_load(frames, 1.0) / 2)
@@ -79,10 +78,12 @@ def test_analyse_a_synthetic_capture():
     for k in range(500):
         tick = 0.001 + k * period
         for node in range(3):
-            frames.append(_frame(tick - 0.0007, node, CommandId.GET_ENCODER_ESTIMATES))            # 0.7 ms before the tick
-            sign = 1.0 if (tick // 0.01) % 2 == 0 else -1.0                                    # operator flips every 10 ms
-            frames.append(_frame(tick + 0.0001 + 1e-5 * node, node, CommandId.SET_INPUT_TORQUE, struct.pack("<ff", sign, 0.0)[:4]))
-    operator = [(j * 0.01 - 0.003, 1.0 if j % 2 == 0 else -1.0) for j in range(1, 100)]   # 3 ms before the flip; next burst 1.1 ms after it
+            frames.append(_frame(tick - 0.0007, node, CommandId.GET_ENCODER_ESTIMATES))   # 0.7 ms before the tick
+            sign = 1.0 if (tick // 0.01) % 2 == 0 else -1.0                           # operator flips every 10 ms
+            frames.append(_frame(tick + 0.0001 + 1e-5 * node, node, CommandId.SET_INPUT_TORQUE,
+                                 struct.pack("<ff", sign, 0.0)[:4]))
+    # 3 ms before the flip; next burst 1.1 ms after it
+    operator = [(j * 0.01 - 0.003, 1.0 if j % 2 == 0 else -1.0) for j in range(1, 100)]
     figures = analyse(frames, operator, (0.0, 1.0), 500.0, {})
     assert figures["loop"]["rate_hz"] == pytest.approx(500.0)
     assert figures["loop"]["deadline_misses"] == 0
@@ -93,7 +94,8 @@ def test_analyse_a_synthetic_capture():
 
 
 def test_targets_are_judged_and_unmeasured_figures_become_null():
-    report = {"control_step_us": {"ce": {"median": 40.0}}, "bus_load": {"fraction_1mbit": 0.7}, "loop": {"jitter_p99_us": math.nan}}
+    report = {"control_step_us": {"ce": {"median": 40.0}}, "bus_load": {"fraction_1mbit": 0.7},
+              "loop": {"jitter_p99_us": math.nan}}
     targets = check_targets(report)
     assert targets["control_step_us.ce.median"]["met"] is True
     assert targets["bus_load.fraction_1mbit"]["met"] is False
@@ -101,24 +103,29 @@ def test_targets_are_judged_and_unmeasured_figures_become_null():
     assert finite_or_null({"a": [math.inf, 1.0]}) == {"a": [None, 1.0]}
 
 
-def test_the_daemon_summary_line_is_parsed_with_and_without_the_newer_figures():
-    from sharedctl.services.studies.bench.stack_run import SUMMARY, _int_after
-    from sharedctl.services.controller.loop_summary import Summary
+def test_the_daemons_json_summary_is_read_in_the_benchs_names(tmp_path):
+    from sharedctl.services.studies.bench.stack_run import daemon_summary
 
-    line = Summary(ticks=9000, elapsed=18.0, rate=500.0, missed=1, late=2, jitter_p50_ms=0.01, jitter_p99_ms=0.09,
-                   jitter_max_ms=1.0, compute_p50_ms=0.36, compute_p99_ms=1.13, torque_out_p50_ms=0.34,
-                   torque_out_p99_ms=0.53, sensor_to_torque_p50_ms=0.61, sensor_to_torque_p99_ms=0.92,
-                   loop_cpu_p50_ms=0.81, loop_cpu_p99_ms=1.52, cpu_percent=43.0,
-                   sensor_waits=12, sensor_wait_timeouts=3).line()
-    g = SUMMARY.search(line).groupdict()
-    assert (g["missed"], g["late"], g["c50"], g["o50"], g["o99"], g["s50"], g["s99"], g["l50"], g["l99"], g["cpu"]) == (
-        "1", "2", "0.360", "0.340", "0.530", "0.610", "0.920", "0.810", "1.520", "43")
-    assert _int_after(r"waited for their wheel estimates (\d+)", line) == 12
-    assert _int_after(r"waited for their wheel estimates \d+ \((\d+) in vain\)", line) == 3
-    older = line.replace(", torque out p50 0.340 ms p99 0.530 ms", "").replace(
-        ", sensor to torque p50 0.610 ms p99 0.920 ms", "").replace(", loop thread CPU p50 0.810 ms p99 1.520 ms per period", "")
-    g = SUMMARY.search(older).groupdict()
-    assert g["o50"] is None and g["s50"] is None and g["l50"] is None and g["c99"] == "1.130" and g["cpu"] == "43"
+    path = controller_json(tmp_path, ticks=9000, rate_hz=500.0, missed=1, late=2, jitter_p50_us=10.0,
+                           jitter_p99_us=90.0, jitter_max_us=1000.0, compute_p50_us=360.0, compute_p99_us=1130.0,
+                           torque_out_p50_us=340.0, torque_out_p99_us=530.0, sensor_to_torque_p50_us=610.0,
+                           sensor_to_torque_p99_us=920.0, loop_cpu_p50_us=810.0, loop_cpu_p99_us=1520.0,
+                           cpu_percent=43.4, sensor_waits=12, sensor_waits_in_vain=3, frames_rx=63000,
+                           rejections={"stale": 1}, mode="running")
+    got = daemon_summary(path)
+    assert (got["missed"], got["late"], got["compute_p50_us"], got["torque_out_p50_us"], got["torque_out_p99_us"]) == (
+        1, 2, 360.0, 340.0, 530.0)
+    assert (got["lateness_p50_us"], got["lateness_p99_us"], got["lateness_max_us"]) == (10.0, 90.0, 1000.0)
+    assert (got["sensor_to_torque_p50_us"], got["loop_cpu_p50_us"], got["loop_cpu_p99_us"]) == (610.0, 810.0, 1520.0)
+    assert (got["cpu_percent"], got["sensor_waits"], got["sensor_waits_in_vain"],
+            got["frames_rx"]) == (43, 12, 3, 63000)
+    assert "rejections" not in got and "mode" not in got     # what the bench does not report, it does not carry
+
+
+def test_a_controller_that_wrote_no_summary_has_none(tmp_path):
+    from sharedctl.services.studies.bench.stack_run import daemon_summary
+
+    assert daemon_summary(tmp_path / "controller.json") == {}
 
 
 def test_estimates_that_arrived_after_the_tick_started_are_not_counted_as_used():
@@ -137,46 +144,40 @@ def test_estimates_that_arrived_after_the_tick_started_are_not_counted_as_used()
     assert compute_only["latency"]["sensor_to_torque_us"]["p50"] == pytest.approx(2300.0, abs=1e-3)
 
 
-def test_the_causes_of_missed_deadlines_are_read_from_the_summary_line():
-    from sharedctl.services.studies.bench.stack_run import _daemon_summary
-    from sharedctl.services.controller.loop_summary import Summary
+def test_the_causes_of_missed_deadlines_are_read_from_the_daemons_summary(tmp_path):
+    from sharedctl.services.studies.bench.stack_run import daemon_summary
 
-    line = Summary(ticks=9000, elapsed=18.0, rate=500.0, missed=3, late=4, misses_woke_late=2, misses_not_run=4,
-                   misses_working=1, working_cpu_p50_ms=2.25, working_frames_p50=7.0, working_commands_p50=1.5,
-                   frames_rx=63000).line()
-
-    got = _daemon_summary(LoggedChild("other output\n" + line))
+    got = daemon_summary(controller_json(tmp_path, missed=3, late=4, misses_woke_late=2, misses_not_run=4,
+                                         misses_working=1, misses_working_cpu_p50_us=2250.0,
+                                         misses_working_frames_p50=7.0, misses_working_commands_p50=1.5))
     assert (got["missed"], got["late"], got["misses_woke_late"], got["misses_not_run"], got["misses_working"]) == (
         3, 4, 2, 4, 1)
     assert got["misses_working_cpu_p50_us"] == 2250.0
-    assert (got["misses_working_frames_p50"], got["misses_working_commands_p50"], got["frames_rx"]) == (7.0, 1.5, 63000)
+    assert (got["misses_working_frames_p50"], got["misses_working_commands_p50"]) == (7.0, 1.5)
     assert got["miss_times"] == []
 
 
-def test_the_first_misses_times_are_read_from_the_summary_line_and_merged_over_controllers():
+def test_the_first_misses_times_are_read_from_the_daemons_summary_and_merged_over_controllers(tmp_path):
     from sharedctl.services.studies.bench.markdown import _miss_times
-    from sharedctl.services.studies.bench.stack_run import _daemon_summary, merge_summaries
-    from sharedctl.services.controller.loop_summary import Summary
+    from sharedctl.services.studies.bench.stack_run import daemon_summary, merge_summaries
 
-    line = Summary(ticks=10, missed=1, late=1, miss_times=((0.3125, "working"), (12.0, "not running"))).line()
-    got = _daemon_summary(LoggedChild(line))
-    assert got["miss_times"] == [[0.312, "working"], [12.0, "not running"]]
-    assert _daemon_summary(LoggedChild(line.split("; first misses")[0]))["miss_times"] is None    # an older line
+    got = daemon_summary(controller_json(tmp_path, missed=1, late=1, miss_times=[
+        {"t_s": 0.3125, "cause": "working"}, {"t_s": 12.0, "cause": "not running"}]))
+    assert got["miss_times"] == [[0.3125, "working"], [12.0, "not running"]]
     merged = merge_summaries([got, dict(got, miss_times=[[1.5, "woke late"]])])
-    assert merged["miss_times"] == [[0.312, "working"], [12.0, "not running"], [1.5, "woke late"]]
+    assert merged["miss_times"] == [[0.3125, "working"], [12.0, "not running"], [1.5, "woke late"]]
     assert _miss_times(got["miss_times"]) == "0.31 (working), 12.00 (not running)"
     assert (_miss_times([]), _miss_times(None)) == ("none", "—")
 
 
-def test_the_output_instant_and_the_compute_before_it_are_read_from_the_summary_line():
-    from sharedctl.services.studies.bench.stack_run import _daemon_summary
-    from sharedctl.services.controller.loop_summary import Summary
+def test_the_output_instant_and_the_compute_before_it_are_read_from_the_daemons_summary(tmp_path):
+    from sharedctl.services.studies.bench.stack_run import daemon_summary
 
-    held = Summary(ticks=10, torque_ready_p50_ms=0.21, torque_ready_p99_ms=0.48, torque_at_ms=0.35).line()
-    at_once = Summary(ticks=10, torque_ready_p50_ms=0.2).line()
-    got, plain = _daemon_summary(LoggedChild(held)), _daemon_summary(LoggedChild(at_once))
-    assert (got["torque_ready_p50_us"], got["torque_ready_p99_us"], got["torque_at_us"]) == (210.0, 480.0, 350.0)
-    assert plain["torque_at_us"] == 0.0 and plain["torque_ready_p50_us"] == 200.0
+    held = daemon_summary(controller_json(tmp_path, torque_ready_p50_us=210.0, torque_ready_p99_us=480.0,
+                                          torque_at_us=350.0))
+    at_once = daemon_summary(controller_json(tmp_path, torque_ready_p50_us=200.0, torque_at_us=0.0))
+    assert (held["torque_ready_p50_us"], held["torque_ready_p99_us"], held["torque_at_us"]) == (210.0, 480.0, 350.0)
+    assert at_once["torque_at_us"] == 0.0 and at_once["torque_ready_p50_us"] == 200.0
 
 
 def test_several_controllers_summaries_are_summed_and_their_percentiles_labelled_worst_or_median():

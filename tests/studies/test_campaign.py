@@ -136,6 +136,38 @@ def test_a_run_without_ground_truth_is_an_error_row():
     assert row["outcome"] == "error" and row["documented"] is True
 
 
+ROBOT_EXIT = {"physics_steps": 4000, "missed_ticks": 2600, "skipped_s": 0.25, "elapsed_s": 4.25}
+CONTROLLER_EXIT = {"ticks": 1900, "missed": 3, "late": 5, "jitter_max_us": 1250.0, "estops": 1}
+HOST = {"robot_physics_steps": 4000.0, "robot_missed_ticks": 2600.0, "robot_skipped_s": 0.25,
+        "controller_missed_deadlines": 3.0, "controller_jitter_max_ms": 1.25, "controller_estops": 1.0}
+
+
+def test_host_figures_come_from_the_json_the_robot_and_the_controller_wrote_in_the_log_dir(tmp_path):
+    (tmp_path / "robot.json").write_text(json.dumps(ROBOT_EXIT))
+    (tmp_path / "controller.json").write_text(json.dumps(CONTROLLER_EXIT))
+    assert cp.host_figures(tmp_path) == HOST
+    assert cp.overloaded(cp.host_figures(tmp_path))            # 2600 of 4000 physics ticks missed
+
+
+def test_host_figures_come_from_the_childrens_summaries_in_the_demos_json():
+    demo = {"processes": {"robot": {"exit_code": 0, "summary": ROBOT_EXIT},
+                          "controller": {"exit_code": 0, "summary": CONTROLLER_EXIT}, "console": {"exit_code": 0}}}
+    assert cp.host_figures(None, demo) == HOST
+
+
+def test_printed_exit_lines_are_not_read_for_host_figures(tmp_path):
+    (tmp_path / "robot.log").write_text("sharedctl robot: stopped after 4.25 s: physics steps 4000, missed ticks 2600, "
+                                        "skipped 0.250 s\n")
+    assert cp.host_figures(tmp_path) is None
+
+
+def test_a_violation_on_a_host_whose_robot_missed_most_of_its_ticks_is_put_down_to_overload(tmp_path):
+    demo = dict(_summary(2, -0.01, first=2.5), processes={"robot": {"summary": ROBOT_EXIT}})
+    row = cp.judge(cp.Case("adversarial_wall", ("operator.delay_ms=300",)), cp.RunResult(demo, 1, 9.0))
+    assert row["host"]["robot_missed_ticks"] == 2600.0 and "host overloaded" in row["explained"]
+    assert row["documented"] is True
+
+
 def test_campaign_runs_every_case_in_order_and_aggregates():
     cases = cp.plan(quick=True)[:5]
     margins = [0.03, 0.02, -0.4, 0.05, 0.01]
@@ -180,8 +212,8 @@ def test_campaign_stops_when_asked():
 
 def test_report_has_the_table_and_the_plots(tmp_path):
     grid = [cp.Case("adversarial_wall", tuple(f for f in (f"operator.delay_ms={d}" if d else "",
-                                                          f"operator.loss={l}" if l else "") if f))
-            for d in (0, 300) for l in (0, 0.5)]
+                                                          f"operator.loss={loss}" if loss else "") if f))
+            for d in (0, 300) for loss in (0, 0.5)]
     kill = cp.Case("adversarial_wall", ("controller.kill_at=2",))
     rows = [cp.judge(c, cp.RunResult(_summary(0, 0.02 + 0.01 * i), 0, 8.0)) for i, c in enumerate(grid)]
     rows.append(cp.judge(kill, cp.RunResult(_summary(30, -0.8, first=2.7), 1, 8.0), _forecast(-1.1)))
@@ -227,7 +259,8 @@ def test_stopping_distance_formula_agrees_with_the_plant(speed, brake_torque):
 
 def test_the_brakes_shorten_the_stop_from_1_m_s_more_than_fourfold(plant):
     unbraked = Plant(OmniRobot(), RobotSimConfig(brake_torque=0.0))
-    assert stopping.worst_coast_model(unbraked).stopping_distance(1.0) > 4 * stopping.worst_coast_model(plant).stopping_distance(1.0)
+    assert (stopping.worst_coast_model(unbraked).stopping_distance(1.0)
+            > 4 * stopping.worst_coast_model(plant).stopping_distance(1.0))
 
 
 @pytest.mark.parametrize("distance", [0.025, 0.3, 0.6, 2.0])

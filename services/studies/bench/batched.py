@@ -51,8 +51,10 @@ def _loop(controller: str = "ce") -> ClosedLoop:
 def fleet(loop: ClosedLoop, robots: int, seed: int = 1) -> BatchProblem:
     """`robots` random robots and adversaries on `loop`'s scenario (the adversarial wall's layout)."""
     rng = np.random.default_rng(seed)
-    q0 = np.column_stack([rng.uniform(-0.8, 0.8, robots), rng.uniform(3.75, 3.95, robots), rng.uniform(-0.8, 0.8, robots)])
-    v0 = np.column_stack([rng.uniform(-0.3, 0.3, robots), rng.uniform(0.2, 0.8, robots), rng.uniform(-0.3, 0.3, robots)])
+    q0 = np.column_stack([rng.uniform(-0.8, 0.8, robots), rng.uniform(3.75, 3.95, robots),
+                          rng.uniform(-0.8, 0.8, robots)])
+    v0 = np.column_stack([rng.uniform(-0.3, 0.3, robots), rng.uniform(0.2, 0.8, robots),
+                          rng.uniform(-0.3, 0.3, robots)])
     target = np.vstack([rng.uniform(-1.5, 1.5, robots), rng.uniform(4.3, 6.0, robots), rng.uniform(-1.0, 1.0, robots)])
     kp = np.broadcast_to(rng.uniform(10.0, 40.0, robots), (3, robots))
     operators = OperatorBatch.adversaries(kp, target, rng.uniform(0.3, 1.5, robots))
@@ -62,7 +64,8 @@ def fleet(loop: ClosedLoop, robots: int, seed: int = 1) -> BatchProblem:
 def _scalar_loop(loop: ClosedLoop, problem: BatchProblem, i: int) -> ClosedLoop:
     ops = problem.operators
     target = ops.target[:, i].copy()
-    human = AdversarialOperator(LineTrajectory(target, np.zeros(3)), ops.kp[:, i].copy(), target, float(ops.deflection[i]))
+    human = AdversarialOperator(LineTrajectory(target, np.zeros(3)), ops.kp[:, i].copy(), target,
+                                float(ops.deflection[i]))
     return ClosedLoop(loop.model, loop.feasible, human, loop.controller, loop.sharing, loop.reference)
 
 
@@ -83,7 +86,8 @@ def _run_part(args) -> tuple[int, float]:
     return int(result.steps.sum()), time.process_time() - cpu
 
 
-def _batch_rate(problem: BatchProblem, seconds: float, chunk: int = 8192, pool=None, parts: int = 1) -> tuple[float, float]:
+def _batch_rate(problem: BatchProblem, seconds: float, chunk: int = 8192, pool=None,
+                parts: int = 1) -> tuple[float, float]:
     """(robot-steps/s of wall time, of CPU time summed over the processes); `pool` runs `parts` slices at once."""
     slices = [problem.take(idx) for idx in np.array_split(np.arange(problem.size), parts)]
     wall = time.perf_counter()
@@ -111,14 +115,17 @@ def measure_batched(quick: bool) -> dict:
             scalar.append(_scalar_rate(loop, problem, p["scalar_robots"], p["seconds"]))
             one.append(_batch_rate(problem, p["seconds"]))
             many.append(_batch_rate(problem, p["seconds"], pool=pool, parts=workers))
-    med = lambda rows, k: float(np.median([r[k] for r in rows]))   # noqa: E731
+
+    def med(rows, k):
+        return float(np.median([r[k] for r in rows]))
+
     scalar_rate = med(scalar, 0)
     return {
         "robots": p["robots"], "steps_per_s": med(many, 0), "scalar_steps_per_s": scalar_rate,
         "speedup_vs_scalar": med(many, 0) / scalar_rate, "processes": workers,
         "one_process": {"steps_per_s": med(one, 0), "speedup_vs_scalar": med(one, 0) / scalar_rate},
-        "cpu": {"steps_per_s": med(many, 1), "one_process_steps_per_s": med(one, 1), "scalar_steps_per_s": med(scalar, 1),
-                "speedup_vs_scalar": med(one, 1) / med(scalar, 1)},
+        "cpu": {"steps_per_s": med(many, 1), "one_process_steps_per_s": med(one, 1),
+                "scalar_steps_per_s": med(scalar, 1), "speedup_vs_scalar": med(one, 1) / med(scalar, 1)},
     }
 
 
@@ -141,12 +148,14 @@ def scaling(quick: bool = True) -> dict:
     by_robots = []
     for robots in (256, 1024, 2048, 4096, 8192, 16384):
         wall, cpu = _batch_rate(fleet(loop, robots), seconds)
-        by_robots.append({"robots": robots, "groups": len(loop.feasible.groups), "steps_per_s": wall, "cpu_steps_per_s": cpu})
+        by_robots.append({"robots": robots, "groups": len(loop.feasible.groups), "steps_per_s": wall,
+                          "cpu_steps_per_s": cpu})
     by_groups = []
     for sides in (4, 6, 8, 12):
         poly = polygon_loop(sides)
         wall, cpu = _batch_rate(fleet(poly, 4096), seconds)
-        by_groups.append({"robots": 4096, "groups": len(poly.feasible.groups), "steps_per_s": wall, "cpu_steps_per_s": cpu})
+        by_groups.append({"robots": 4096, "groups": len(poly.feasible.groups), "steps_per_s": wall,
+                          "cpu_steps_per_s": cpu})
     return {"by_robots": by_robots, "by_groups": by_groups}
 
 

@@ -4,7 +4,8 @@
     loop.{rate_hz,deadline_misses,jitter_p99_us}       500 Hz over CAN with the simulated robot (stack_run.py):
                                                        3 controllers (6 in the full run) one after the other
     loop_1khz.{…}                                      the same at 1 kHz
-    loop_free_running.{…}                              500 Hz with --no-sensor-sync (the default locks ticks to the estimates)
+    loop_free_running.{…}                              500 Hz with --no-sensor-sync (the default locks ticks to
+                                                       the estimates)
     latency.{sensor_to_torque_us,operator_to_torque_us,zenoh_floor_us,can_floor_us}.{p50,p99}
     batched_sim.{robots,steps_per_s,scalar_steps_per_s,speedup_vs_scalar}   (batched.py)
     bus_load.fraction_1mbit                            frames seen on the bus, worst-case stuffing
@@ -17,8 +18,8 @@
                                                        machine_floor.turns: each controller beside the loop after it
 
 --markdown OUT writes the same as tables (docs/performance/bench.md); --from-json IN re-renders a saved run.
---quick: 15 s at 500 Hz (+ 15 s of the bare loop), 8 s at 1 kHz, shorter step trajectories (under 3 minutes); the full run:
-60 s and 20 s, plus the step's breakdown, floors, profile and scaling with the number of groups.
+--quick: 15 s at 500 Hz (+ 15 s of the bare loop), 8 s at 1 kHz, shorter step trajectories (under 3 minutes); the
+full run: 60 s and 20 s, plus the step's breakdown, floors, profile and scaling with the number of groups.
 Targets are reported, never enforced: timing depends on the machine and its load.
 """
 from __future__ import annotations
@@ -48,11 +49,13 @@ TARGETS = {
 
 
 def add_parser(subparsers) -> None:
-    p = subparsers.add_parser("bench", help="measure step cost, loop timing, latency, bus load, CPU and the batched simulator")
+    p = subparsers.add_parser("bench",
+                              help="measure step cost, loop timing, latency, bus load, CPU and the batched simulator")
     p.add_argument("--quick", action="store_true", help="shorter runs (under 3 minutes)")
     p.add_argument("--json", metavar="OUT", help="write the figures as JSON to OUT")
     p.add_argument("--markdown", metavar="OUT", help="write the figures as Markdown tables to OUT")
-    p.add_argument("--from-json", metavar="IN", help="no measurement: render IN (a --json report) as the table / Markdown")
+    p.add_argument("--from-json", metavar="IN",
+                   help="no measurement: render IN (a --json report) as the table / Markdown")
     p.add_argument("--skip-stack", action="store_true", help="no processes: only the step and the batched simulator")
     p.set_defaults(handler=run)
 
@@ -73,7 +76,7 @@ def machine() -> dict:
 def _version(name: str) -> str:
     try:
         return importlib.import_module(name).__version__
-    except Exception:  # noqa: BLE001
+    except (ImportError, AttributeError):   # not installed, or no __version__
         return "?"
 
 
@@ -102,7 +105,7 @@ def _stack_run(*args, progress=print, **kwargs) -> dict:
     listener bound it (another process's outgoing connection can draw the same ephemeral port)."""
     try:
         return stack_run.run(*args, **kwargs)
-    except Exception as exc:  # noqa: BLE001 — zenoh.ZError is not importable without zenoh
+    except Exception as exc:  # zenoh.ZError is not importable without zenoh
         if "Address already in use" not in str(exc):
             raise
         progress(f"a loopback port was taken before the stack bound it ({type(exc).__name__}); again with new ports …")
@@ -159,10 +162,12 @@ def ratios(report: dict) -> dict:
 
     return {
         "sensor_to_torque_over_can_floor_p50": over("latency.sensor_to_torque_us.p50", "latency.can_floor_us.p50"),
-        "operator_to_torque_over_zenoh_floor_p50": over("latency.operator_to_torque_us.p50", "latency.zenoh_floor_us.p50"),
+        "operator_to_torque_over_zenoh_floor_p50": over("latency.operator_to_torque_us.p50",
+                                                        "latency.zenoh_floor_us.p50"),
         "ce_step_over_nce_step": over("control_step_us.ce.median", "control_step_us.nce.median"),
         "of_step_over_ce_step": over("control_step_us.of.median", "control_step_us.ce.median"),
-        "ce_step_in_numpy_calls": over("control_step_us.ce.median", "control_step_detail.floors_ns.numpy_ufunc_3_ns") and
+        "ce_step_in_numpy_calls": over("control_step_us.ce.median",
+                                       "control_step_detail.floors_ns.numpy_ufunc_3_ns") and
         over("control_step_us.ce.median", "control_step_detail.floors_ns.numpy_ufunc_3_ns") * 1e3,
         "ce_step_over_period_500hz": (lookup(report, "control_step_us.ce.median") or math.nan) / 2000.0,
         "loop_misses_over_machine_floor_misses": over("loop.deadline_misses", "machine_floor.deadline_misses"),
@@ -190,8 +195,8 @@ def check_targets(report: dict) -> dict:
 def table(report: dict):
     from rich.table import Table
 
-    t = Table(title=f"sharedctl bench{' --quick' if report['quick'] else ''} · load {report['machine'].get('loadavg_before')} → "
-                    f"{report['machine'].get('loadavg_after')}")
+    t = Table(title=f"sharedctl bench{' --quick' if report['quick'] else ''} · "
+                    f"load {report['machine'].get('loadavg_before')} → {report['machine'].get('loadavg_after')}")
     t.add_column("figure")
     t.add_column("value", justify="right")
     t.add_column("target")
@@ -208,10 +213,12 @@ def table(report: dict):
     rows += ["loop.rate_hz", "loop.deadline_misses", "loop.jitter_p99_us", "loop_1khz.rate_hz",
              "loop_1khz.deadline_misses", "loop_1khz.jitter_p99_us", "loop_free_running.deadline_misses",
              "loop_free_running.jitter_p99_us", "loop_free_running.sensor_to_torque_us.p50",
-             "loop_free_running.sensor_to_torque_us.p99", "loop.drives_send_jitter_us.p99", "machine_floor.deadline_misses",
-             "machine_floor.send_jitter_us.p99", "machine_floor.deadline_to_send_us.p99",
-             "machine_floor.lateness_us.p99", "machine_floor.work_wall_us.p99", "machine_floor.work_wall_us.max"]
-    rows += [f"latency.{k}.{s}" for k in ("sensor_to_torque_us", "operator_to_torque_us", "zenoh_floor_us", "can_floor_us")
+             "loop_free_running.sensor_to_torque_us.p99", "loop.drives_send_jitter_us.p99",
+             "machine_floor.deadline_misses", "machine_floor.send_jitter_us.p99",
+             "machine_floor.deadline_to_send_us.p99", "machine_floor.lateness_us.p99", "machine_floor.work_wall_us.p99",
+             "machine_floor.work_wall_us.max"]
+    rows += [f"latency.{k}.{s}"
+             for k in ("sensor_to_torque_us", "operator_to_torque_us", "zenoh_floor_us", "can_floor_us")
              for s in ("p50", "p99")]
     rows += ["batched_sim.robots", "batched_sim.steps_per_s", "batched_sim.scalar_steps_per_s",
              "batched_sim.speedup_vs_scalar", "bus_load.fraction_1mbit", "cpu.fraction_of_one_core"]

@@ -137,7 +137,8 @@ def breakdown(law: str = "ce", repeats: int = 2000) -> dict:
         "law_evaluate": lambda: law_.evaluate(loop.model, grp, c, q, v_used, state.theta_hat, state.law_state),
         "region_margins": lambda: feasible.region_margins(q, rows[0]),
         # only on samples that select a group (take-over, operator in charge): not in this one
-        "all_groups_on_demand": lambda: all_groups(feasible.stack, q, v_used, operator.desired, reference, machine.tracking.lam),
+        "all_groups_on_demand": lambda: all_groups(feasible.stack, q, v_used, operator.desired, reference,
+                                                   machine.tracking.lam),
         "whole_step": lambda: controller.step(state, q, v if feedback else None, operator, PERIOD),
     }
     return {name: _median_us(fn, repeats) for name, fn in parts.items()}
@@ -192,7 +193,8 @@ def scaling(group_counts=(1, 2, 4, 8, 16), law: str = "ce", repeats: int = 3) ->
     for groups in group_counts:
         data = copy.deepcopy(base)
         data["region"] = [
-            {"K": [[1, 0, 0], [0, 1, 0], [0, 0, 1]], "T": [-(1.5 + 0.1 * i), -(4.0 + 0.05 * i), -(1.5707963267948966 + 0.01 * i)]}
+            {"K": [[1, 0, 0], [0, 1, 0], [0, 0, 1]],
+             "T": [-(1.5 + 0.1 * i), -(4.0 + 0.05 * i), -(1.5707963267948966 + 0.01 * i)]}
             for i in range(groups)
         ]
         data["initial"] = {"q": [0.0, 2.0, 0.0], "qdot": [0.0, 0.0, 0.0]}

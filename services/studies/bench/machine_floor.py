@@ -38,8 +38,8 @@ import time
 
 import numpy as np
 
-from sharedctl.protocol.canframe import DEFAULT_WHEEL_NODES, arbitration_id
-from sharedctl.protocol.odrive_enums import CommandId
+from sharedctl.protocol import cansimple
+from sharedctl.protocol.canframe import DEFAULT_WHEEL_NODES
 
 from sharedctl.services.controller.priority import make_loop_realtime, pin_to_cpu
 from sharedctl.services.lifecycle import RateClock, poll_until
@@ -86,22 +86,20 @@ def steal_seconds() -> float | None:
 
 
 class BusIO:
-    """The daemon's per-period CAN I/O on `port` (services/can_ports.py), without handling the frames."""
+    """The daemon's per-period CAN I/O on `transport` (services/can_transport/), without handling the frames."""
 
-    def __init__(self, port, nodes=DEFAULT_WHEEL_NODES) -> None:
-        from sharedctl.services.controller.frame_layout import torque_data
-
-        self.port = port
-        self.torque = [(arbitration_id(n, CommandId.SET_INPUT_TORQUE), torque_data(0.0)) for n in nodes]
+    def __init__(self, transport, nodes=DEFAULT_WHEEL_NODES) -> None:
+        self.transport = transport
+        self.torque = [cansimple.torque_frame(n, 0.0) for n in nodes]
         self.rx = self.tx = 0
 
     def drain(self) -> None:
         """The frames waiting now."""
-        self.rx += len(self.port.read(2000))
+        self.rx += len(self.transport.read(2000))
 
     def send(self) -> None:
         for arb, data in self.torque:
-            self.port.send(arb, False, 8, data)
+            self.transport.send(arb, False, 8, data)
         self.tx += len(self.torque)
 
     def read_until(self, deadline: float) -> None:
@@ -111,9 +109,9 @@ class BusIO:
             if now >= deadline:
                 return
             try:
-                frame = self.port.recv(min(deadline - now, RECEIVE_SLICE))
-            except self.port.UNREADABLE:
-                self.port.bad += 1
+                frame = self.transport.recv(min(deadline - now, RECEIVE_SLICE))
+            except self.transport.UNREADABLE:
+                self.transport.bad += 1
                 continue
             self.rx += frame is not None
 
@@ -144,10 +142,10 @@ def _loop(rate_hz: float, seconds: float, work_us: float, spin: float, pre_send_
     pre_us = work_us if pre_send_us is None else min(pre_send_us, work_us)
     bus = io = None
     if can_port is not None:
-        from sharedctl.services import can_bus, can_ports
+        from sharedctl.services import can_bus
 
-        bus = can_bus.open_bus(can_bus.resolve("udp_multicast", None, {"port": can_port}))
-        io = BusIO(can_ports.port_for(bus))
+        bus = can_bus.open_transport(can_bus.resolve("udp_multicast", None, {"port": can_port}))
+        io = BusIO(bus)
     try:
         io_drain, io_send, io_read = _io_cost(io, period, spin) if io is not None else (0.0, 0.0, 0.0)
         pre = _calibrate(pre_us - io_drain)
@@ -200,8 +198,13 @@ def figures(runs: list[dict]) -> dict:
     """The floor's figures over one or more runs of `_loop` (turns of the same loop): counts summed,
     percentiles over all ticks, the period jitter within each run (never across the gap between two)."""
     first = runs[0]
-    cat = lambda name: np.concatenate([r["samples"][name] for r in runs])   # noqa: E731
-    us = lambda a: {k: v / 1e3 for k, v in percentiles(a).items() if k != "n"}   # noqa: E731
+
+    def cat(name):
+        return np.concatenate([r["samples"][name] for r in runs])
+
+    def us(a):
+        return {k: v / 1e3 for k, v in percentiles(a).items() if k != "n"}
+
     lateness, wall, pre_wall = cat("lateness"), cat("wall"), cat("pre_wall")
     jitter = np.concatenate([np.abs(np.diff(r["samples"]["sent"]) - 1e9 / r["rate_hz"]) for r in runs])
     steals = [r["steal_s"] for r in runs]
@@ -242,7 +245,8 @@ class FloorProcess:
             raw = self.pipe.recv()
         except EOFError:
             self.process.join(1.0)
-            raise RuntimeError(f"the floor's loop sent nothing: its process ended (exit code {self.process.exitcode})") from None
+            raise RuntimeError(f"the floor's loop sent nothing: its process ended "
+                               f"(exit code {self.process.exitcode})") from None
         if isinstance(raw, BaseException):
             raise raw
         return raw

@@ -32,7 +32,8 @@ def render(report: dict) -> str:
         f"# sharedctl bench{' --quick' if report.get('quick') else ''} — {report.get('started', '?')}",
         "",
         f"Machine: {m.get('cpu')}, {m.get('cores')} cores, kernel {m.get('kernel')}, Python {m.get('python')}, "
-        f"numpy {m.get('numpy')}; load average (1, 5, 15 min) before {m.get('loadavg_before')}, after {m.get('loadavg_after')}.",
+        f"numpy {m.get('numpy')}; load average (1, 5, 15 min) before {m.get('loadavg_before')}, "
+        f"after {m.get('loadavg_after')}.",
         "",
         "## Targets",
         "",
@@ -42,7 +43,8 @@ def render(report: dict) -> str:
     for key, t in report.get("targets", {}).items():
         out.append(f"| `{key}` | {_fmt(t.get('value'))} | {t.get('target')} | {_fmt(t.get('met'))} |")
     out += ["", "## Control step (µs; machine law engaged — operator-only steps and all steps beside)", "",
-            "| law | median | p99 | thread-CPU median | all steps median | operator-only median |", "|---|---:|---:|---:|---:|---:|"]
+            "| law | median | p99 | thread-CPU median | all steps median | operator-only median |",
+            "|---|---:|---:|---:|---:|---:|"]
     for law, s in (report.get("control_step_us") or {}).items():
         out.append(f"| {law} | {_fmt(s.get('median'))} | {_fmt(s.get('p99'))} | {_fmt(s.get('thread_cpu_median'))} | "
                    f"{_fmt(lookup(s, 'all.median'))} | {_fmt(lookup(s, 'operator_only.median'))} |")
@@ -63,7 +65,8 @@ def render(report: dict) -> str:
     # the third run: free-running ticks since sensor sync became the default; reports from before: --sensor-sync
     third, label = (("loop_free_running", "--no-sensor-sync") if "loop_free_running" in report
                     else ("loop_sensor_sync", "--sensor-sync"))
-    out += ["", "## Loop, latency, bus, CPU", "", f"| figure | 500 Hz | 1 kHz | 500 Hz, {label} |", "|---|---:|---:|---:|"]
+    out += ["", "## Loop, latency, bus, CPU", "", f"| figure | 500 Hz | 1 kHz | 500 Hz, {label} |",
+            "|---|---:|---:|---:|"]
     runs = ("loop", "loop_1khz", third)
     for key in ("rate_hz", "deadline_misses", "jitter_p50_us", "jitter_p99_us", "periods_without_torque_on_bus"):
         out.append(f"| loop {key} | " + " | ".join(_fmt(lookup(report, f"{r}.{key}")) for r in runs) + " |")
@@ -73,7 +76,8 @@ def render(report: dict) -> str:
                 "misses_not_run", "misses_working", "misses_working_cpu_p50_us"):
         out.append(f"| daemon {key} | " + " | ".join(_fmt(lookup(report, f"{r}.daemon.{key}")) for r in runs) + " |")
     out.append("| the drives' send jitter p50 / p99 µs | " + " | ".join(
-        f"{_fmt(lookup(report, f'{r}.drives_send_jitter_us.p50'))} / {_fmt(lookup(report, f'{r}.drives_send_jitter_us.p99'))}"
+        f"{_fmt(lookup(report, f'{r}.drives_send_jitter_us.p50'))} / "
+        f"{_fmt(lookup(report, f'{r}.drives_send_jitter_us.p99'))}"
         for r in runs) + " |")
     sensor = ("latency.sensor_to_torque_us", "loop_1khz.sensor_to_torque_us", f"{third}.sensor_to_torque_us")
     out.append("| sensor → torque p50 / p99 µs | " + " | ".join(
@@ -83,11 +87,12 @@ def render(report: dict) -> str:
                f"{_fmt(lookup(report, f'{third}.operator_to_torque_us.p50'))} / "
                f"{_fmt(lookup(report, f'{third}.operator_to_torque_us.p99'))} |")
     for key in ("zenoh_floor_us", "can_floor_us"):
-        out.append(f"| {key.removesuffix('_us').replace('_', ' ')} p50 / p99 µs | {_fmt(lookup(report, f'latency.{key}.p50'))} / "
-                   f"{_fmt(lookup(report, f'latency.{key}.p99'))} | | |")
+        out.append(f"| {key.removesuffix('_us').replace('_', ' ')} p50 / p99 µs | "
+                   f"{_fmt(lookup(report, f'latency.{key}.p50'))} / {_fmt(lookup(report, f'latency.{key}.p99'))} | | |")
     out.append(f"| bus load (1 Mbit/s, worst-case stuffing) | {_fmt(lookup(report, 'bus_load.fraction_1mbit'))} | "
                f"{_fmt(lookup(report, 'loop_1khz.bus_load.fraction_1mbit'))} | |")
-    out.append(f"| CPU, robot + controller (fraction of one core) | {_fmt(lookup(report, 'cpu.fraction_of_one_core'))} | "
+    out.append(f"| CPU, robot + controller (fraction of one core) | "
+               f"{_fmt(lookup(report, 'cpu.fraction_of_one_core'))} | "
                f"{_fmt(lookup(report, 'loop_1khz.cpu.fraction_of_one_core'))} | |")
     per = lookup(report, "cpu.per_process") or {}
     if per:
@@ -96,7 +101,8 @@ def render(report: dict) -> str:
     floor = report.get("machine_floor")
     if floor:
         out += _floor_section(report, floor)
-    out += ["", "## Batched simulator", "", "| robots | robot-steps/s | scalar steps/s | speed-up |", "|---:|---:|---:|---:|",
+    out += ["", "## Batched simulator", "", "| robots | robot-steps/s | scalar steps/s | speed-up |",
+            "|---:|---:|---:|---:|",
             f"| {_fmt(b.get('robots'))} | {_fmt(b.get('steps_per_s'))} | {_fmt(b.get('scalar_steps_per_s'))} | "
             f"{_fmt(b.get('speedup_vs_scalar'))} |"]
     if b.get("reason"):
@@ -118,8 +124,8 @@ def _floor_section(report: dict, floor: dict) -> list[str]:
     pre = floor.get("pre_send_us", floor.get("work_us"))
     pinned = f", on CPU {floor['cpu']}" if floor.get("cpu") is not None else ""
     turns = floor.get("turns") if isinstance(floor.get("turns"), list) else []
-    where = (f"on the bus, after each of the {len(turns)} controllers of the 500 Hz run, beside the same robot, listener "
-             "and probes, with the amounts of work that controller reported (the last one's below)"
+    where = (f"on the bus, after each of the {len(turns)} controllers of the 500 Hz run, beside the same robot, "
+             "listener and probes, with the amounts of work that controller reported (the last one's below)"
              if floor.get("on_bus") else "in a fresh process")
     out = ["", f"Machine floor (machine_floor.py): a bare {_fmt(floor['rate_hz'])} Hz loop {where}, "
            f"{_fmt(floor['work_us'])} µs of thread CPU per period ({_fmt(pre)} µs of it before the send), "
@@ -144,16 +150,20 @@ def _floor_section(report: dict, floor: dict) -> list[str]:
          + f" ({_fmt(lookup(report, 'loop.daemon.misses_working_cpu_p50_us'))}; "
          f"{_fmt(lookup(report, 'loop.daemon.misses_working_frames_p50'))} and "
          f"{_fmt(lookup(report, 'loop.daemon.misses_working_commands_p50'))}; {_fmt(_frames_per_tick(report))})", ""),
-        ("period jitter p50 / p99 µs (torque bursts on the bus" + (")" if on_bus else "; the floor: its send instants)"),
+        ("period jitter p50 / p99 µs (torque bursts on the bus"
+         + (")" if on_bus else "; the floor: its send instants)"),
          f"{_fmt(lookup(report, 'loop.jitter_p50_us'))} / {_fmt(lookup(report, 'loop.jitter_p99_us'))}", jitter_floor),
         ("wake-up lateness p99 / max µs",
-         f"{_fmt(lookup(report, 'loop.daemon.lateness_p99_us'))} / {_fmt(lookup(report, 'loop.daemon.lateness_max_us'))}",
+         f"{_fmt(lookup(report, 'loop.daemon.lateness_p99_us'))} / "
+         f"{_fmt(lookup(report, 'loop.daemon.lateness_max_us'))}",
          f"{_fmt(floor['lateness_us']['p99'])} / {_fmt(floor['lateness_us']['max'])}"),
         ("tick start → send p50 / p99 µs",
-         f"{_fmt(lookup(report, 'loop.daemon.torque_out_p50_us'))} / {_fmt(lookup(report, 'loop.daemon.torque_out_p99_us'))}",
+         f"{_fmt(lookup(report, 'loop.daemon.torque_out_p50_us'))} / "
+         f"{_fmt(lookup(report, 'loop.daemon.torque_out_p99_us'))}",
          f"{_fmt(floor['pre_send_wall_us']['p50'])} / {_fmt(floor['pre_send_wall_us']['p99'])}"),
         ("loop thread CPU per period p50 / p99 µs",
-         f"{_fmt(lookup(report, 'loop.daemon.loop_cpu_p50_us'))} / {_fmt(lookup(report, 'loop.daemon.loop_cpu_p99_us'))}",
+         f"{_fmt(lookup(report, 'loop.daemon.loop_cpu_p50_us'))} / "
+         f"{_fmt(lookup(report, 'loop.daemon.loop_cpu_p99_us'))}",
          f"{_fmt(floor['work_thread_cpu_us']['p50'])} / {_fmt(floor['work_thread_cpu_us']['p99'])}"),
         (f"sensor → torque p99 µs (the floor: the sensor lead, {SENSOR_LEAD_US:g} µs, + deadline → send p99)",
          _fmt(lookup(report, "latency.sensor_to_torque_us.p99")),
@@ -173,7 +183,8 @@ def _floor_section(report: dict, floor: dict) -> list[str]:
                 "loop started (cause) |", "|---:|---:|---:|---:|---:|---:|---|"]
         for k, t in enumerate(turns, 1):
             d, f = t["daemon"], t["floor"]
-            out.append(f"| {k} | {_fmt(d['deadline_misses'])} ({_fmt(d['misses_woke_late'])} / {_fmt(d['misses_not_run'])} / "
+            out.append(f"| {k} | {_fmt(d['deadline_misses'])} ({_fmt(d['misses_woke_late'])} / "
+                       f"{_fmt(d['misses_not_run'])} / "
                        f"{_fmt(d['misses_working'])}) | {_fmt(f['deadline_misses'])} | {_fmt(d['jitter_p99_us'])} / "
                        f"{_fmt(f['jitter_p99_us'])} | {_fmt(d['loop_cpu_p50_us'])} / {_fmt(f['loop_cpu_p50_us'])} | "
                        f"{_fmt(d['steal_s'])} / {_fmt(f['steal_s'])} | {_miss_times(d.get('miss_times'))} |")

@@ -11,11 +11,11 @@ every figure is taken window by window (`analyse_turns`), and this process's gar
 off for the run (its operator must not pause).
 
 * loop: torque bursts (three Set_Input_Torque frames per tick) on the bus → rate, period jitter
-  |Δt − T| and periods without a burst; the daemon's own summary line (missed/late ticks, wake-up
-  lateness, compute time) is parsed too.
+  |Δt − T| and periods without a burst; beside them the daemon's own exit summary (missed/late ticks,
+  wake-up lateness, compute time…), the JSON it writes with `--json` (`daemon_summary`).
 * sensor → torque: for each burst, the age of the wheel estimates the tick used: the oldest of
   the three axes' newest Get_Encoder_Estimates that arrived before the tick started — the burst
-  minus the daemon's median "torque out" time (tick start → torque frames sent; its summary line),
+  minus the daemon's median "torque out" time (tick start → torque frames sent; its exit summary),
   since a frame arriving during the computation was not used. The daemon reports its own figure
   beside it (`daemon.sensor_to_torque_*`: from the kernel arrival stamp of the oldest estimate a
   tick used to its torque frames handed to the bus), exact about which estimates a tick used; the
@@ -35,7 +35,6 @@ from __future__ import annotations
 
 import gc
 import os
-import re
 import struct
 import sys
 import tempfile
@@ -52,6 +51,7 @@ from sharedctl.protocol.msgpack_codec import encode_message
 from sharedctl.protocol.odrive_enums import CommandId
 
 from sharedctl.services import can_bus, children, zenoh_session
+from sharedctl.services.summary_output import read_json
 from .bus_load import bus_load
 from .hop_probe import PROBE_CAN_ID, PROBE_KEY, unpack_time
 from . import machine_floor
@@ -66,18 +66,9 @@ PROBE_RATE = 500.0         # Hz, each transport probe
 DRIVES_RATE = 500.0        # Hz, the simulated drives' encoder estimates (paper_convex's [robot_sim] default)
 SENSOR_LEAD_US = 250.0     # the controller's sensor lead (its default), passed explicitly: the floor's figures use it
 SETTLE = 2.5               # s after start before the window opens (arming, Zenoh links)
-FLOOR_START_LIMIT = 30.0   # s the floor's process may take beyond its run (start, calibration) before the bench gives up
+# s the floor's process may take beyond its run (start, calibration) before the bench gives up
+FLOOR_START_LIMIT = 30.0
 FLOOR_WORK_US = 400.0      # µs of CPU per period in the floor's loop where a controller's own figures are missing
-
-SUMMARY = re.compile(
-    r"(?P<ticks>\d+) ticks at (?P<rate>[\d.]+) Hz, (?P<missed>\d+) missed / (?P<late>\d+) late deadlines, "
-    r"jitter p50 (?P<j50>[\d.]+) ms p99 (?P<j99>[\d.]+) ms max (?P<jmax>[\d.]+) ms, "
-    r"compute p50 (?P<c50>[\d.]+) ms p99 (?P<c99>[\d.]+) ms, "
-    r"(?:torque out p50 (?P<o50>[\d.]+) ms p99 (?P<o99>[\d.]+) ms, )?"
-    r"(?:sensor to torque p50 (?P<s50>[\d.]+) ms p99 (?P<s99>[\d.]+) ms, )?"
-    r"(?:loop thread CPU p50 (?P<l50>[\d.]+) ms p99 (?P<l99>[\d.]+) ms per period, )?CPU (?P<cpu>\d+)%"
-)
-
 
 @dataclass
 class Frame:
@@ -198,7 +189,7 @@ def _run(rate_hz: float, seconds: float, log_dir: Path | None, probes: bool, con
     can_args = ["--can-interface", "udp_multicast", "--can-option", f"port={can_port}"]
     per_turn = seconds / turns
     daemon_seconds = SETTLE + per_turn + 0.5
-    whole = turns * (daemon_seconds + 10.0) * (2 if floor else 1) + 10.0      # a bound: everything is stopped at the end
+    whole = turns * (daemon_seconds + 10.0) * (2 if floor else 1) + 10.0   # a bound: everything is stopped at the end
     cpus = cpu_plan() if pin else {}
     robot_cpu = ["--cpu", str(cpus["robot"])] if cpus else []
     controller_cpu = ["--cpu", str(cpus["controller_loop"])] if cpus else []
@@ -213,7 +204,8 @@ def _run(rate_hz: float, seconds: float, log_dir: Path | None, probes: bool, con
         listener.start()
         probe_listener.start()
         robot = children.start_child("robot", ["robot", "--scenario", SCENARIO, *can_args, "--zenoh-listen", z_robot,
-                                               "--robot-id", ROBOT_ID, "--duration", f"{whole:.1f}", *robot_cpu], log_dir)
+                                               "--robot-id", ROBOT_ID, "--duration", f"{whole:.1f}", *robot_cpu],
+                                     log_dir)
         started.append(robot)
         robot_priority = children.raise_priority(robot.popen.pid)
         if not children.wait_listening(z_robot, robot, 20.0):
@@ -225,16 +217,19 @@ def _run(rate_hz: float, seconds: float, log_dir: Path | None, probes: bool, con
             PROBE_KEY, lambda sample: zenoh_arrivals.append((time.time(), unpack_time(sample.payload.to_bytes()))))
         if probes:
             started.append(_start_probe("zenoh_probe", ["zenoh", z_bench, f"{whole:.1f}", f"{PROBE_RATE:g}"], log_dir))
-            started.append(_start_probe("can_probe", ["can", str(probe_port), f"{whole:.1f}", f"{PROBE_RATE:g}"], log_dir))
+            started.append(_start_probe("can_probe", ["can", str(probe_port), f"{whole:.1f}", f"{PROBE_RATE:g}"],
+                                        log_dir))
         for turn in range(turns):
             name = "controller" if turns == 1 else f"controller_{turn + 1}"
             z_ctrl = f"tcp/127.0.0.1:{zenoh_session.free_loopback_port()}"
+            summary_path = log_dir / f"{name}.json"
             controller = children.start_child(name, [
                 "controller", "--scenario", SCENARIO, *can_args, "--zenoh-listen", z_ctrl, "--zenoh-connect", z_bench,
                 "--robot-id", ROBOT_ID, "--rate", f"{rate_hz:g}", "--duration", f"{daemon_seconds:.1f}", "--quiet",
-                "--sensor-lead-us", f"{SENSOR_LEAD_US:g}", *controller_cpu, *controller_args], log_dir)
+                "--sensor-lead-us", f"{SENSOR_LEAD_US:g}", "--json", str(summary_path), *controller_cpu,
+                *controller_args], log_dir)
             started.append(controller)
-            daemon_turns.append(_daemon_turn(controller, z_ctrl, robot, operator, per_turn))
+            daemon_turns.append(_daemon_turn(controller, z_ctrl, robot, operator, per_turn, summary_path))
             if floor:
                 floor_runs.append(_floor_turn(daemon_turns[-1]["summary"], operator, rate_hz, daemon_seconds,
                                               cpus.get("controller_loop"), can_port))
@@ -255,7 +250,10 @@ def _run(rate_hz: float, seconds: float, log_dir: Path | None, probes: bool, con
     windows = [t["window"] for t in daemon_turns]
     figures = analyse_turns(listener.frames, operator.log, windows, rate_hz, [t["summary"] for t in daemon_turns])
     figures["cpu"] = _cpu_turns([t["cpu"] for t in daemon_turns])
-    inside = lambda t: any(lo <= t <= hi for lo, hi in windows)   # noqa: E731
+
+    def inside(t):
+        return any(lo <= t <= hi for lo, hi in windows)
+
     figures["latency"]["zenoh_floor_us"] = percentiles(
         [arrived - sent for arrived, sent in zenoh_arrivals if inside(sent)], 1e6)
     probe = [f for f in probe_listener.frames if f.can_id == PROBE_CAN_ID and f.dlc == 8]
@@ -263,7 +261,8 @@ def _run(rate_hz: float, seconds: float, log_dir: Path | None, probes: bool, con
     if floor_runs:
         figures["machine_floor"] = dict(
             machine_floor.figures(floor_runs),
-            bus=analyse_turns(listener.frames, [], [r["window"] for r in floor_runs], rate_hz, [{}] * len(floor_runs))["loop"],
+            bus=analyse_turns(listener.frames, [], [r["window"] for r in floor_runs], rate_hz,
+                              [{}] * len(floor_runs))["loop"],
             turns=[_turn_pair(listener.frames, rate_hz, t, r) for t, r in zip(daemon_turns, floor_runs)])
     figures["windows"] = windows
     figures["processes"] = {c.name: c.report() for c in started}
@@ -274,9 +273,9 @@ def _run(rate_hz: float, seconds: float, log_dir: Path | None, probes: bool, con
 
 
 def _daemon_turn(controller: children.Child, z_ctrl: str, robot: children.Child, operator: Operator,
-                 seconds: float) -> dict:
-    """One controller from its start to its exit, the operator sending throughout; the window opens SETTLE s
-    after it listens."""
+                 seconds: float, summary_path: Path) -> dict:
+    """One controller from its start to its exit (its summary then at `summary_path`), the operator sending
+    throughout; the window opens SETTLE s after it listens."""
     if not children.wait_listening(z_ctrl, controller, 20.0):
         raise RuntimeError(f"{controller.name} did not start (log: {controller.log})")
     opens = time.time() + SETTLE
@@ -290,7 +289,7 @@ def _daemon_turn(controller: children.Child, z_ctrl: str, robot: children.Child,
 
     operator.run(lambda: len(marks) == 2, mark)
     operator.run(lambda: controller.popen.poll() is not None or time.time() > window[1] + 10.0)
-    return {"window": window, "summary": _daemon_summary(controller), "cpu": (marks[0], marks[1])}
+    return {"window": window, "summary": daemon_summary(summary_path), "cpu": (marks[0], marks[1])}
 
 
 def _floor_turn(summary: dict, operator: Operator, rate_hz: float, seconds: float, cpu: int | None,
@@ -345,59 +344,29 @@ def _start_probe(name: str, argv: list[str], log_dir: Path) -> children.Child:
     return children.Child(name, popen, log)
 
 
-def _daemon_summary(controller: children.Child) -> dict:
-    tail = controller.tail(40)
-    match = SUMMARY.search(tail)
-    if not match:
+# the figures of the controller's exit summary (loop_stats.py) the bench reports, in the bench's names: the
+# controller's `jitter_*` (its ticks' lateness after their deadlines) is the bench's `lateness_*`
+DAEMON_KEYS = ("estops", "ticks", "rate_hz", "missed", "late", "lateness_p50_us", "lateness_p99_us", "lateness_max_us",
+               "compute_p50_us", "compute_p99_us", "cpu_percent", "torque_out_p50_us", "torque_out_p99_us",
+               "sensor_to_torque_p50_us", "sensor_to_torque_p99_us", "loop_cpu_p50_us", "loop_cpu_p99_us",
+               "sensor_waits", "sensor_waits_in_vain", "misses_woke_late", "misses_not_run", "misses_working",
+               "misses_working_cpu_p50_us", "misses_working_frames_p50", "misses_working_commands_p50", "frames_rx",
+               "torque_ready_p50_us", "torque_ready_p99_us", "torque_at_us")
+CONTROLLER_NAMES = {"lateness_p50_us": "jitter_p50_us", "lateness_p99_us": "jitter_p99_us",
+                    "lateness_max_us": "jitter_max_us"}
+
+
+def daemon_summary(path: Path) -> dict:
+    """The controller's exit summary (its `--json` file) as the bench reports it: `DAEMON_KEYS`, the CPU share in
+    whole percent, the first misses as [s, cause] pairs. {} if the controller wrote none."""
+    summary = read_json(path)
+    if summary is None:
         return {}
-    g = match.groupdict()
-    return {"estops": _int_after(r"estops (\d+)", tail), "ticks": int(g["ticks"]),
-            "rate_hz": float(g["rate"]), "missed": int(g["missed"]), "late": int(g["late"]),
-            "lateness_p50_us": float(g["j50"]) * 1e3, "lateness_p99_us": float(g["j99"]) * 1e3,
-            "lateness_max_us": float(g["jmax"]) * 1e3, "compute_p50_us": float(g["c50"]) * 1e3,
-            "compute_p99_us": float(g["c99"]) * 1e3, "cpu_percent": int(g["cpu"]),
-            "torque_out_p50_us": float(g["o50"]) * 1e3 if g["o50"] else None,
-            "torque_out_p99_us": float(g["o99"]) * 1e3 if g["o99"] else None,
-            "sensor_to_torque_p50_us": float(g["s50"]) * 1e3 if g["s50"] else None,
-            "sensor_to_torque_p99_us": float(g["s99"]) * 1e3 if g["s99"] else None,
-            "loop_cpu_p50_us": float(g["l50"]) * 1e3 if g["l50"] else None,
-            "loop_cpu_p99_us": float(g["l99"]) * 1e3 if g["l99"] else None,
-            "sensor_waits": _int_after(r"waited for their wheel estimates (\d+)", tail),
-            "sensor_waits_in_vain": _int_after(r"waited for their wheel estimates \d+ \((\d+) in vain\)", tail),
-            "misses_woke_late": _int_after(r"by cause: (\d+) woke late", tail),
-            "misses_not_run": _int_after(r"(\d+) overran while not running", tail),
-            "misses_working": _int_after(r"(\d+) overran while working", tail),
-            "misses_working_cpu_p50_us": _ms_after_as_us(r"overran while working \(thread CPU p50 ([\d.]+) ms", tail),
-            "misses_working_frames_p50": _float_after(r"overran while working \(.*?CAN frames p50 ([\d.]+)", tail),
-            "misses_working_commands_p50": _float_after(r"overran while working \(.*?operator messages p50 ([\d.]+)", tail),
-            "frames_rx": _int_after(r"CAN frames rx (\d+)", tail),
-            "torque_ready_p50_us": _ms_after_as_us(r"torques computed p50 ([\d.]+) ms", tail),
-            "torque_ready_p99_us": _ms_after_as_us(r"torques computed p50 [\d.]+ ms p99 ([\d.]+) ms", tail),
-            "torque_at_us": 0.0 if "sent as soon as computed" in tail else _ms_after_as_us(r"sent at deadline \+ ([\d.]+) ms", tail),
-            "miss_times": _miss_times(tail)}
-
-
-def _miss_times(text: str) -> list | None:
-    """The summary line's "first misses at: 0.312 s (working), …" as [[0.312, "working"], …] (None: not said)."""
-    match = re.search(r"first misses at: ([^\n]*)", text)
-    if not match:
-        return None
-    return [[float(t), cause] for t, cause in re.findall(r"([\d.]+) s \(([a-z ]+)\)", match.group(1))]
-
-
-def _ms_after_as_us(pattern: str, text: str) -> float | None:
-    match = re.search(pattern, text)
-    return float(match.group(1)) * 1e3 if match else None
-
-
-def _float_after(pattern: str, text: str) -> float | None:
-    match = re.search(pattern, text)
-    return float(match.group(1)) if match else None
-
-
-def _int_after(pattern: str, text: str) -> int | None:
-    match = re.search(pattern, text)
-    return int(match.group(1)) if match else None
+    out = {key: summary.get(CONTROLLER_NAMES.get(key, key)) for key in DAEMON_KEYS}
+    if out["cpu_percent"] is not None:
+        out["cpu_percent"] = round(out["cpu_percent"])
+    out["miss_times"] = [[m["t_s"], m["cause"]] for m in summary.get("miss_times", [])]
+    return out
 
 
 def _cpu_turns(turns) -> dict:
@@ -420,7 +389,7 @@ def _cpu_turns(turns) -> dict:
 
 
 def merge_summaries(summaries: list[dict]) -> dict:
-    """The controllers' summary lines as one: counts summed; of each percentile, the worst turn's (p99, max)
+    """The controllers' exit summaries as one: counts summed; of each percentile, the worst turn's (p99, max)
     or the median of the turns' (p50) — labelled so in docs/performance.md. One summary stays as it is."""
     if len(summaries) == 1 or not all(summaries):     # one missing line: no sum at all (the bus counts instead)
         return summaries[0] if len(summaries) == 1 else {}
@@ -459,7 +428,10 @@ def analyse_turns(frames: list[Frame], operator_log, windows, rate_hz: float, su
     is taken within one window, never across the gap between two; the samples are then pooled."""
     period = 1.0 / rate_hz
     parts = [_window(frames, operator_log, w, period, s) for w, s in zip(windows, summaries)]
-    pool = lambda name: np.concatenate([np.asarray(p[name], dtype=float) for p in parts])   # noqa: E731
+
+    def pool(name):
+        return np.concatenate([np.asarray(p[name], dtype=float) for p in parts])
+
     summary = merge_summaries(summaries)
     missed_bus = sum(p["missed_bus"] for p in parts)
     span = sum(p["span"] for p in parts)
@@ -538,7 +510,8 @@ def _sensor_ages(bursts: list[float], encoder: list[Frame], compute: float) -> l
 def _operator_latencies(first_frames: list[Frame], torque: list[Frame], operator_log, period: float) -> list[float]:
     """Send time of each command → the first torque burst after it whose wheel-0 torque has the command's sign
     (the sign convention learnt from the run: the majority of sign(τ₀)·sign(command) over the bursts)."""
-    wheel0 = [(f.t, struct.unpack("<f", f.data[:4])[0]) for f in torque if (f.can_id >> 5) == (torque[0].can_id >> 5)] if torque else []
+    wheel0 = ([(f.t, struct.unpack("<f", f.data[:4])[0]) for f in torque if (f.can_id >> 5) == (torque[0].can_id >> 5)]
+              if torque else [])
     if not wheel0 or not operator_log:
         return []
     times = np.array([t for t, _ in wheel0])

@@ -34,7 +34,8 @@ def add_parser(subparsers) -> None:
     c.add_argument("--resume", action="store_true",
                    help="keep the measured rows of an existing --json OUT, run the rest (and the runs not exercised)")
     c.add_argument("--retries", type=int, default=1, metavar="N",
-                   help="run a case again, at most N times, when an estop before its start left it not exercised (default 1)")
+                   help="run a case again, at most N times, when an estop before its start left it not exercised "
+                        "(default 1)")
     c.add_argument("--budget", type=float, metavar="S", help="start no new run after S seconds")
     c.add_argument("--keep-logs", metavar="DIR", help="keep every run's JSON and process logs in DIR")
     c.add_argument("--list", action="store_true", help="print the cases and exit")
@@ -130,7 +131,8 @@ def run(args) -> int:
         return stop.stopped or (args.budget is not None and time.monotonic() - start > args.budget)
 
     from rich.console import Console
-    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
+    from rich.progress import (BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn,
+                               TimeRemainingColumn)
 
     console = Console(stderr=True)
     columns = (TextColumn("[bold]faults[/bold] {task.description}"), BarColumn(), MofNCompleteColumn(),
@@ -187,7 +189,8 @@ def _rejudge(args, json_out: Path | None) -> int:
     cp.write_json(json_out, result)
     if args.report:
         from .report import write_report
-        write_report(result, Path(args.report), "Fault campaign" + (" (quick)" if "--quick" in meta.get("command", "") else ""))
+        write_report(result, Path(args.report),
+                     "Fault campaign" + (" (quick)" if "--quick" in meta.get("command", "") else ""))
     print(f"sharedctl faults: {result['runs']} runs judged again, {result['violating_runs']} with violations "
           f"({len(result['unexpected_violations'])} unexpected)")
     return 0 if result["ok"] else 1

@@ -27,8 +27,11 @@ import signal
 import subprocess
 import sys
 import time
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass
 from pathlib import Path
+
+from sharedctl.services.summary_output import read_json
+from sharedctl.services.summary_output import write_json as write_summary_json
 
 ADVERSARIAL, PAPER = "adversarial_wall", "paper_convex"
 DURATION = 5.0                   # s of every run unless the case says otherwise
@@ -109,11 +112,13 @@ class RunResult:
     log_dir: Path | None = None      # the run's process logs, if kept
 
 
-_FIGURES = (("robot", r"physics steps (\d+)", "robot_physics_steps"), ("robot", r"missed ticks (\d+)", "robot_missed_ticks"),
-            ("robot", r"skipped ([\d.]+) s", "robot_skipped_s"),
-            ("controller", r"(\d+) missed / \d+ late deadlines", "controller_missed_deadlines"),
-            ("controller", r"jitter p50 [\d.]+ ms p99 [\d.]+ ms max ([\d.]+) ms", "controller_jitter_max_ms"),
-            ("controller", r"; estops (\d+), torque-limited", "controller_estops"))
+# (process, key of its exit summary, the row's `host` key, scale): the real-time loops' figures a row keeps
+_FIGURES = (("robot", "physics_steps", "robot_physics_steps", 1.0),
+            ("robot", "missed_ticks", "robot_missed_ticks", 1.0),
+            ("robot", "skipped_s", "robot_skipped_s", 1.0),
+            ("controller", "missed", "controller_missed_deadlines", 1.0),
+            ("controller", "jitter_max_us", "controller_jitter_max_ms", 1e-3),
+            ("controller", "estops", "controller_estops", 1.0))
 
 
 OVERLOAD_MISSED_FRACTION = 0.5   # the robot's loop missed more than half its physics ticks
@@ -126,20 +131,22 @@ def overloaded(host: dict | None) -> bool:
     return host.get("robot_missed_ticks", 0) / host["robot_physics_steps"] > OVERLOAD_MISSED_FRACTION
 
 
-def host_figures(log_dir: Path | None) -> dict | None:
-    """How far the robot's and the controller's real-time loops fell behind (their exit lines), if logged."""
-    import re
-    if log_dir is None or not log_dir.is_dir():
-        return None
+def host_figures(log_dir: Path | None, demo: dict | None = None) -> dict | None:
+    """How far the robot's and the controller's real-time loops fell behind, from their exit summaries: the
+    ones the demo's JSON holds (`processes.<name>.summary`), else the JSON files they wrote in the run's log
+    directory (`<name>.json`). None if there are none."""
+    processes = (demo or {}).get("processes") or {}
+    summaries = {}
+    for name in ("robot", "controller"):
+        summary = (processes.get(name) or {}).get("summary")
+        if summary is None and log_dir is not None:
+            summary = read_json(Path(log_dir) / f"{name}.json")
+        summaries[name] = summary or {}
     out = {}
-    for name, pattern, key in _FIGURES:
-        try:
-            text = (log_dir / f"{name}.log").read_text(errors="replace")
-        except OSError:
-            continue
-        found = re.findall(pattern, text)
-        if found:
-            out[key] = float(found[-1])
+    for name, key, figure, scale in _FIGURES:
+        value = summaries[name].get(key)
+        if isinstance(value, (int, float)) and not isinstance(value, bool):
+            out[figure] = float(value) * scale
     return out or None
 
 
@@ -178,36 +185,40 @@ def plan(quick: bool = False) -> list[Case]:
         + _cases(A, [()], controller="nce")
         + _cases(A, [()], controller="of"))
     add("operator-grid", [Case(A, tuple(f for f in (f"operator.delay_ms={d}" if d else "",
-                                                    f"operator.loss={l:g}" if l else "") if f))
-                          for d in delays for l in losses if d or l])
+                                                    f"operator.loss={loss:g}" if loss else "") if f))
+                          for d in delays for loss in losses if d or loss])
     add("operator-grid-paper", [Case(P, tuple(f for f in (f"operator.delay_ms={d}" if d else "",
-                                                          f"operator.loss={l:g}" if l else "") if f))
-                                for d in (0, 300, 1000) for l in (0.0, 0.5, 0.9) if d or l])
+                                                          f"operator.loss={loss:g}" if loss else "") if f))
+                                for d in (0, 300, 1000) for loss in (0.0, 0.5, 0.9) if d or loss])
     add("operator-jitter", _cases(A, [["operator.delay_ms=100", "operator.jitter=pareto:100"],
-                                      ["operator.jitter=normal:50"], ["operator.delay_ms=300", "operator.jitter_ms=200"]]))
+                                      ["operator.jitter=normal:50"],
+                                      ["operator.delay_ms=300", "operator.jitter_ms=200"]]))
     add("operator-burst", _cases(A, [[f"operator.burst={p:g},{r:g}"] for p, r in
                                      ((0.05, 0.5), (0.1, 0.3), (0.2, 0.2), (0.3, 0.1), (0.5, 0.05))])
         + _cases(P, [[f"operator.burst={p:g},{r:g}"] for p, r in ((0.1, 0.3), (0.3, 0.1))]))
     add("operator-blackout", _cases(A, [[f"operator.blackout={s:g},5"] for s in (0.5, 1.0, 1.5, 2.0, 2.3)], 7.5)
         + _cases(P, [[f"operator.blackout={s:g},5"] for s in (1.0, 2.0)], 7.5))
     add("operator-garble", _cases(A, [["operator.duplicate=0.5"], ["operator.duplicate=1.0"], ["operator.reorder=0.3"],
-                                      ["operator.reorder=0.5,100"], ["operator.corrupt=0.1"], ["operator.corrupt=0.5,4"],
+                                      ["operator.reorder=0.5,100"], ["operator.corrupt=0.1"],
+                                      ["operator.corrupt=0.5,4"],
                                       ["operator.replay=0.3"], ["operator.replay=0.5,1000"], ["operator.rate=20"]]))
     add("telemetry", _cases(A, [["telemetry.delay_ms=100"], ["telemetry.delay_ms=300"], ["telemetry.delay_ms=500"],
                                 ["telemetry.delay_ms=1000"],
                                 ["telemetry.loss=0.3"], ["telemetry.loss=0.8"], ["telemetry.loss=1.0"],
                                 ["telemetry.blackout=1.0,3"], ["telemetry.burst=0.2,0.2"]]))
-    add("can-loss", _cases(A, [[f"can.loss={l:g}"] for l in (0.01, 0.02, 0.05, 0.1, 0.15, 0.2)])
-        + _cases(P, [[f"can.loss={l:g}"] for l in (0.05, 0.1, 0.2)]))
+    add("can-loss", _cases(A, [[f"can.loss={loss:g}"] for loss in (0.01, 0.02, 0.05, 0.1, 0.15, 0.2)])
+        + _cases(P, [[f"can.loss={loss:g}"] for loss in (0.05, 0.1, 0.2)]))
     add("can-delay", _cases(A, [[f"can.delay_ms={d:g}"] for d in (0.5, 1, 2, 3, 4, 5, 6, 7, 8, 10)])
         + _cases(P, [[f"can.delay_ms={d:g}"] for d in (2, 5, 10)]))
-    add("can-mixed", _cases(A, [[f"can.loss={l:g}", f"can.delay_ms={d:g}"] for l in (0.05, 0.2) for d in (2, 5, 10)])
+    add("can-mixed", _cases(A, [[f"can.loss={loss:g}", f"can.delay_ms={d:g}"] for loss in (0.05, 0.2)
+                                for d in (2, 5, 10)])
         + _cases(A, [["can.jitter_ms=2"], ["can.ids=feedback", "can.loss=0.2"], ["can.ids=command", "can.loss=0.2"],
                      ["can.duplicate=0.2"], ["can.reorder=0.1,2"]]))
     add("can-corrupt", _cases(A, [["can.corrupt=0.01"], ["can.corrupt=0.05"]]) + _cases(P, [["can.corrupt=0.05"]]))
     add("can-busoff", _cases(A, [[f"can.busoff={s:g},{d:g}"] for s in (0.5, 1.0, 1.9, 3.5) for d in (0.03, 0.3, 1.0)])
         + _cases(P, [[f"can.busoff=2,{d:g}"] for d in (0.03, 0.3)]))
-    add("can-babble", _cases(A, [["can.babble=1000"], ["can.babble=4000,0x000,1.0,2.0"]]) + _cases(P, [["can.babble=2000"]]))
+    add("can-babble", _cases(A, [["can.babble=1000"], ["can.babble=4000,0x000,1.0,2.0"]])
+        + _cases(P, [["can.babble=2000"]]))
     kills = (0.25, 0.5, 0.75, 1.0, 1.1, 1.2, 1.3, 1.4, 1.5, 1.75, 1.9, 2.1, 2.3, 3.0, 3.5, 4.0)
     add("controller-kill", _cases(A, [[f"controller.kill_at={t:g}"] for t in kills])
         + _cases(P, [[f"controller.kill_at={t:g}"] for t in (1.0, 2.5, 4.0)]))
@@ -216,7 +227,8 @@ def plan(quick: bool = False) -> list[Case]:
         + _cases(P, [[f"controller.stop_at=2,{d:g}"] for d in (0.05, 0.3, 1.0)]))
     add("console-kill", _cases(A, [[f"console.kill_at={t:g}"] for t in (0.5, 1.0, 1.5, 2.0, 3.0)])
         + _cases(P, [[f"console.kill_at={t:g}"] for t in (1.0, 3.0)]))
-    add("robot-kill", _cases(A, [["robot.kill_at=1.0"], ["robot.kill_at=2.0"], ["robot.kill_at=3.0"]]) + _cases(P, [["robot.kill_at=2.0"]]))
+    add("robot-kill", _cases(A, [["robot.kill_at=1.0"], ["robot.kill_at=2.0"], ["robot.kill_at=3.0"]])
+        + _cases(P, [["robot.kill_at=2.0"]]))
     add("combined", _cases(A, [["operator.delay_ms=300", "can.loss=0.05"], ["operator.loss=0.5", "can.delay_ms=5"],
                                ["operator.burst=0.2,0.2", "telemetry.delay_ms=300", "can.loss=0.05"],
                                ["operator.delay_ms=500", "console.kill_at=3.0"]])
@@ -333,7 +345,7 @@ def judge(case: Case, result: RunResult, forecasts=None) -> dict:
         delayed = forecasts.delay(case.scenario, case.duration, case.controller, lag or 0.0, hang)
     first = s.get("first_violation_t")
     estop_first = [t for t in _estop_times(s) if first is not None and t <= first]
-    host = host_figures(result.log_dir)
+    host = host_figures(result.log_dir, result.summary)
     # an estop the demo's observer did not see (before it connected) still shows in the controller's count
     estops = max(estops, int((host or {}).get("controller_estops", 0)))
     # an estop before the run's start, or before a timed fault lands: the fault met a robot already stopping
@@ -357,15 +369,17 @@ def judge(case: Case, result: RunResult, forecasts=None) -> dict:
         elif delayed is not None and delayed["worst_min_margin"] < 0.0:
             what = (f"torque loop delayed by {1e3 * lag:.0f} ms or more" if lag else
                     f"controller hung {1e3 * hang[1]:.0f} ms at {hang[0]:g} s (torque held)")
-            explained = f"{what}: beyond the measured delay limit (in-process margin {delayed['worst_min_margin']:.3f} m)"
+            explained = (f"{what}: beyond the measured delay limit "
+                         f"(in-process margin {delayed['worst_min_margin']:.3f} m)")
         else:
             reasons = []
             if overloaded(host):
-                reasons.append(f"host overloaded: the robot's real-time loop missed {host['robot_missed_ticks']:.0f} of "
-                               f"{host['robot_physics_steps']:.0f} ticks (stalls caught up with the torque held: a "
+                reasons.append(f"host overloaded: the robot's real-time loop missed {host['robot_missed_ticks']:.0f} "
+                               f"of {host['robot_physics_steps']:.0f} ticks (stalls caught up with the torque held: a "
                                f"torque-loop delay beyond the limit of docs/safety.md §3)")
             if estop_first:
-                reasons.append(f"estop at {estop_first[0]:.2f} s before the first violation: a braked stop too long for the margin")
+                reasons.append(f"estop at {estop_first[0]:.2f} s before the first violation: "
+                               "a braked stop too long for the margin")
             explained = "; ".join(reasons) or None
     min_margin = s.get("min_margin")
     return {
@@ -441,16 +455,7 @@ def rejudge(rows: list[dict], logs: Path, forecasts=None) -> list[dict]:
 
 
 def write_json(path: Path, result: dict) -> None:
+    """The campaign's JSON (summary_output.write_json: atomic, non-finite numbers as null)."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(f"{path}.tmp")
-    tmp.write_text(json.dumps(result, indent=1, default=_jsonable) + "\n")
-    tmp.replace(path)
-
-
-def _jsonable(value):
-    if hasattr(value, "__dataclass_fields__"):
-        return asdict(value)
-    if isinstance(value, float) and not math.isfinite(value):
-        return None
-    return str(value)
+    write_summary_json(path, result, indent=1, default=str)

@@ -83,8 +83,8 @@ def markdown(result: dict, plots: list[str], title: str = "Fault campaign") -> s
                f"{len(result['unexpected_violations'])} unexpected).")
     lines += [f"{result['runs']} runs, {result['wall_seconds']:.0f} s of runs; {verdict} "
               f"Worst ground-truth margin {_fmt(result['min_margin'])} m; {result['estop_runs']} runs with an "
-              f"emergency stop, {len(result.get('not_exercised', []))} of them before the run's start (not exercised: the "
-              f"robot never moved); {len(result['errors'])} runs without a usable measurement.", ""]
+              f"emergency stop, {len(result.get('not_exercised', []))} of them before the run's start "
+              f"(not exercised: the robot never moved); {len(result['errors'])} runs without a usable measurement.", ""]
     if result.get("overloaded_runs"):
         lines += [f"The host could not keep real time in {result['overloaded_runs']} runs (the robot simulator's loop "
                   f"missed more than half of its physics ticks; `host` in each row); "
@@ -111,13 +111,14 @@ def markdown(result: dict, plots: list[str], title: str = "Fault campaign") -> s
         fc = r.get("forecast") or r.get("delay_forecast") or {}
         lines.append(f"* `{r['id']}`: {r['violations']} samples outside, first at {_fmt(r['first_violation_t'], 2)} s, "
                      f"min margin {_fmt(r['min_margin'])} m; "
-                     + (f"forecast: speed {_fmt(fc.get('speed'), 2)} m/s at the fault, margin {_fmt(fc.get('margin'))} m, "
+                     + (f"forecast: speed {_fmt(fc.get('speed'), 2)} m/s at the fault, "
+                        f"margin {_fmt(fc.get('margin'))} m, "
                         f"braking to {_fmt(fc.get('min_margin'))} m; " if "speed" in fc else
                         f"in-process forecast {_fmt(fc.get('worst_min_margin'))} m; " if fc else "")
                      + (r["explained"] or "**not explained by the documented limits**"))
     lines += ["", "## Every run", "",
-              "| # | scenario | faults | outcome | viol. | min margin (m) | estops | forecast margin | robot ticks missed "
-              "| injected | wall (s) |",
+              "| # | scenario | faults | outcome | viol. | min margin (m) | estops | forecast margin "
+              "| robot ticks missed | injected | wall (s) |",
               "|---:|---|---|---|---:|---:|---:|---:|---:|---|---:|"]
     for i, r in enumerate(rows):
         law = f" [{r['controller']}]" if r.get("controller") in ("nce", "of") else ""
@@ -143,10 +144,10 @@ def _heatmap(rows, path: Path) -> Path | None:
     import numpy as np
     plt = _plt()
     delays = sorted({d for d, _ in cells})
-    losses = sorted({l for _, l in cells})
+    losses = sorted({loss for _, loss in cells})
     grid = np.full((len(losses), len(delays)), np.nan)
-    for (d, l), m in cells.items():
-        grid[losses.index(l), delays.index(d)] = m
+    for (d, loss), m in cells.items():
+        grid[losses.index(loss), delays.index(d)] = m
     fig, ax = plt.subplots(figsize=(7.5, 4.5))
     im = ax.imshow(grid, origin="lower", aspect="auto", cmap="RdYlGn", vmin=min(-0.05, np.nanmin(grid)),
                    vmax=max(0.1, np.nanmax(grid)))
@@ -155,7 +156,7 @@ def _heatmap(rows, path: Path) -> Path | None:
             if np.isfinite(grid[i, j]):
                 ax.text(j, i, f"{grid[i, j] * 100:.1f}", ha="center", va="center", fontsize=8)
     ax.set_xticks(range(len(delays)), [f"{d:g}" for d in delays])
-    ax.set_yticks(range(len(losses)), [f"{l * 100:g} %" for l in losses])
+    ax.set_yticks(range(len(losses)), [f"{loss * 100:g} %" for loss in losses])
     ax.set_xlabel("operator → controller delay (ms)")
     ax.set_ylabel("operator → controller loss")
     ax.set_title("adversarial wall: min ground-truth margin (cm)")
@@ -195,7 +196,8 @@ def _by_family(rows, path: Path) -> Path | None:
 
 
 def _actuation(rows, path: Path) -> Path | None:
-    pts = [r for r in rows if r.get("forecast") and r["min_margin"] is not None and r["outcome"] not in ("error", "not exercised")]
+    pts = [r for r in rows if r.get("forecast") and r["min_margin"] is not None
+           and r["outcome"] not in ("error", "not exercised")]
     if not pts:
         return None
     plt = _plt()

@@ -7,8 +7,8 @@ RK4 at 2 kHz) behind the same in-process operator link, once ideal and once with
 and 20 % command loss (seeded). The JSON's `results` hold one row per run with `strategy`,
 `scenario` (the scenario and the condition), `base_scenario`, `condition` and the metrics of
 sharedctl/baselines/comparison_metrics.py; `model_sensitivity` repeats `mux` and `cbf` on the
-adversarial scenarios with wrong nominal parameters (θ̂ = 0.5θ and 2θ). Exit 1 if the shared law violated the set anywhere
-(the one guarantee this command checks), 2 on bad arguments.
+adversarial scenarios with wrong nominal parameters (θ̂ = 0.5θ and 2θ). Exit 1 if the shared law violated the set
+anywhere (the one guarantee this command checks), 2 on bad arguments.
 """
 from __future__ import annotations
 
@@ -69,7 +69,8 @@ def compare(entries: list[Entry], strategies=STRATEGIES, conditions=CONDITIONS, 
 THETA_SCALES = (0.5, 2.0)   # the nominal parameters given to mux and cbf in the model-error runs: θ̂ = s·θ
 
 
-def model_sensitivity(entries: list[Entry], strategies=("mux", "cbf"), scales=THETA_SCALES, progress=None) -> list[dict]:
+def model_sensitivity(entries: list[Entry], strategies=("mux", "cbf"), scales=THETA_SCALES,
+                      progress=None) -> list[dict]:
     """The model-based baselines with wrong nominal parameters, on the adversarial scenarios (ideal link).
 
     `mux` and `cbf` use M̂, Ĉ, ĝ; the shared law needs none (its θ̂ starts at 0 and adapts), so

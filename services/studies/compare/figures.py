@@ -9,11 +9,11 @@ import matplotlib
 
 matplotlib.use("Agg")
 
-import numpy as np  # noqa: E402
-from matplotlib.figure import Figure  # noqa: E402
-from matplotlib.lines import Line2D  # noqa: E402
+import numpy as np
+from matplotlib.figure import Figure
+from matplotlib.lines import Line2D
 
-from sharedctl.services.studies.figures import FONT, draw_feasible_set  # noqa: E402
+from sharedctl.services.studies.figures import FONT, draw_feasible_set
 
 COLOURS = {"human": "#7f7f7f", "mux": "#ff7f0e", "cbf": "#2ca02c", "shared": "#1f77b4"}
 METRICS = (  # key, axis label, log scale

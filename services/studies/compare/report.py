@@ -40,7 +40,8 @@ def write_report(outcomes, doc: dict, out: Path) -> Path:
         figures.append((f"paths_{base}.png", f"{base}: every strategy's path, per link condition."))
         ideal = [o for o in mine if o.condition.name == conditions[0]]
         signals_figure(ideal, f"{base} ({conditions[0]} link)").savefig(out / f"signals_{base}.png", dpi=80)
-        figures.append((f"signals_{base}.png", f"{base}: margin, force and overrides over time ({conditions[0]} link)."))
+        figures.append((f"signals_{base}.png",
+                        f"{base}: margin, force and overrides over time ({conditions[0]} link)."))
     text = _markdown(doc, rows, strategies, labels, figures)
     path = out / "report.md"
     path.write_text(text)
@@ -154,7 +155,8 @@ def _reading(rows, labels) -> list[str]:
                  and table[("mux", lb)]["tracking_error"] > 2.0 * table[("shared", lb)]["tracking_error"]]
         if stuck:
             runs = ", ".join(f"`{lb}` ({ratio:.1f}×)" for lb, ratio in stuck)
-            out.append(f"- **`mux` can get stuck at a face**: tracking error more than twice the shared law's in {runs}. "
+            out.append(f"- **`mux` can get stuck at a face**: tracking error more than twice the shared law's "
+                       f"in {runs}. "
                        "The hold drops the whole command, not just its part into the face: an operator whose "
                        "command keeps any component into the face (as the scripted operator pulling along x = 0 "
                        "does) re-triggers the hold within a sample of every hand-back and never slides along it.")

@@ -49,7 +49,8 @@ def scenario_set(quick: bool = False, duration: float | None = None) -> list[Ent
         ("sharedctl/scenarios/adversarial_wall.toml", _packaged("adversarial_wall")),
         ("sharedctl/scenarios/paper_convex.toml", _packaged("paper_convex")),
         ("sharedctl/scenarios/paper_nonconvex.toml", _packaged("paper_nonconvex")),
-        ("paper_nonconvex.toml with the adversarial operator (services/compare_scenarios.py)", adversarial_corner()),
+        ("paper_nonconvex.toml with the adversarial operator (services/studies/compare/scenarios.py)",
+         adversarial_corner()),
     ]
     out = []
     for source, data in sources:

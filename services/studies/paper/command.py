@@ -38,7 +38,8 @@ def add_parser(subparsers) -> None:
     p.add_argument("--duration", type=_positive, metavar="S", help="override every scenario's duration (s)")
     p.add_argument("--controllers", type=_controller_list, default=CONTROLLERS, metavar="LIST",
                    help="comma-separated machine laws to run (default: ce,nce,of)")
-    p.add_argument("--jobs", type=int, default=2, metavar="N", help="simulations in parallel (default 2; 1 = in process)")
+    p.add_argument("--jobs", type=int, default=2, metavar="N",
+                   help="simulations in parallel (default 2; 1 = in process)")
     p.set_defaults(handler=run)
 
 
@@ -89,7 +90,7 @@ def run(args) -> int:
                     results[(name, c)] = (trace, summary)
                     report.advance(sims, f"{name} {c}: {summary['steps']} steps, {summary['violations']} "
                                          f"violations, min margin {summary['min_margin']:.4g}")
-        except Exception as exc:  # a failed run must still leave a clear message and a non-zero exit
+        except Exception as exc:  # noqa: BLE001 — a failed run must still leave a clear message and a non-zero exit
             print(f"sharedctl paper: simulation failed: {exc!r}", file=sys.stderr)
             return 1
         runs = []
@@ -114,7 +115,8 @@ def run(args) -> int:
             "configured_law_share": configured_law_share(r.trace, r.loop),
         })
     ok = all(rec["violations"] == 0 and rec["finite"] for rec in records)
-    (out / "summary.json").write_text(json.dumps(_plain({"ok": ok, "runs": records, "figures": figures}), indent=2) + "\n")
+    document = _plain({"ok": ok, "runs": records, "figures": figures})
+    (out / "summary.json").write_text(json.dumps(document, indent=2) + "\n")
     (out / "summary.md").write_text(summary_markdown(records, figures, args, ok))
     print(metrics_table(records))
     print(f"\n{'all runs inside Q_a and finite' if ok else 'FAILED: a run left Q_a or diverged'}; "
@@ -185,7 +187,8 @@ def metrics_table(records: list[dict]) -> str:
 
 def summary_markdown(records: list[dict], figures: list[dict], args, ok: bool) -> str:
     options = "".join([f" --duration {args.duration:g}" if args.duration else "",
-                       f" --controllers {','.join(args.controllers)}" if tuple(args.controllers) != CONTROLLERS else ""])
+                       f" --controllers {','.join(args.controllers)}"
+                       if tuple(args.controllers) != CONTROLLERS else ""])
     durations = ", ".join(f"{r['scenario']} {r['duration']:g} s" for r in records[:: max(1, len(args.controllers))])
     names = ", ".join(records[0]["parameter_names"]) if records else ""
     lines = [
@@ -229,8 +232,8 @@ class _Reporter:
         if sys.stdout.isatty():
             from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
-            self.progress = Progress(TextColumn("{task.description:<11}"), BarColumn(bar_width=30), MofNCompleteColumn(),
-                                     TimeElapsedColumn(), TextColumn("{task.fields[note]}"))
+            self.progress = Progress(TextColumn("{task.description:<11}"), BarColumn(bar_width=30),
+                                     MofNCompleteColumn(), TimeElapsedColumn(), TextColumn("{task.fields[note]}"))
             self.progress.__enter__()
         self.totals: dict[int, tuple[str, int, int]] = {}
         return self

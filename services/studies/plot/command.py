@@ -67,7 +67,7 @@ def _single(panel, trace, loop, title: str, size=(11, 4.2), time_axis: bool = Tr
     ax = fig.add_subplot()
     panel(ax, trace, loop)
     if time_axis:
-        figures._time_axis(ax)
+        figures.time_axis(ax)
     fig.suptitle(title, fontsize=11)
     return fig, ax
 
@@ -118,7 +118,7 @@ def link_figure(run: RecordedRun, title: str):
         counts, _ = np.histogram(times, bins=edges)
         ax.step(edges[:-1], counts / 0.5, where="post", color=f"C{i % 10}", lw=1.1,
                 label=topic.split("/", 3)[-1] if topic.count("/") >= 3 else topic)
-    for t, kind, severity, text in run.events:
+    for t, kind, severity, _text in run.events:
         colour = SEVERITY_COLOUR.get(severity, "0.5")
         for axis in axes:
             axis.axvline(t, color=colour, lw=0.8, ls=":", alpha=0.8)
@@ -127,7 +127,7 @@ def link_figure(run: RecordedRun, title: str):
     ax.set_ylabel("messages/s (0.5 s bins)", fontsize=8.5)
     ax.set_title("Message rate per topic; events as dotted lines")
     ax.legend(loc="upper left", bbox_to_anchor=(1.005, 1.0), fontsize=8)
-    figures._time_axis(ax)
+    figures.time_axis(ax)
     ax.set_xlabel("t (s, recorder log time)")
     fig.suptitle(title, fontsize=12)
     return fig

@@ -1,0 +1,74 @@
+"""The controller's Zenoh side: what it publishes (RobotState, events, Heartbeat messages and a
+liveliness token), the operator commands it takes (command_intake.py) and the lease queries it
+answers (lease_queries.py → lease.py).
+
+A lease query is answered on a Zenoh callback thread under the daemon's lock, after the operator
+commands that arrived before it are judged: a take or release never overtakes a command.
+"""
+from __future__ import annotations
+
+import sys
+import time
+
+from sharedctl.protocol import keys
+from sharedctl.protocol.msgpack_codec import encode_message
+
+from . import command_intake, lease_queries
+from .command_intake import CommandIntake
+
+
+class ControllerLinks:
+    """The publishers, token, subscriber and queryable of robot `robot_id`'s controller (`role`) on `session`;
+    `policy` judges the operator commands and holds the lease, `lock` is the daemon's."""
+
+    def __init__(self, session, robot_id: str, role: str, policy, lease_guard, lock, events, verbose: bool) -> None:
+        self.robot_id, self.policy, self.lease_guard, self.lock = robot_id, policy, lease_guard, lock
+        self.events, self.verbose = events, verbose       # events: telemetry.EventLimiter
+        self.state_pub = session.declare_publisher(keys.state_key(robot_id))
+        self.event_pub = session.declare_publisher(keys.events_key(robot_id))
+        self.alive_pub = session.declare_publisher(keys.alive_key(robot_id, role))
+        self.token = session.liveliness().declare_token(keys.alive_key(robot_id, role))
+        self.subscriber = session.declare_subscriber(keys.operator_cmd_key(robot_id), command_intake.channel())
+        self.intake = CommandIntake(self.subscriber, policy)
+        self.queryable = session.declare_queryable(keys.lease_key(robot_id), self.on_lease_query)
+
+    def apply_commands(self) -> None:
+        """The operator commands that arrived, judged in arrival order (caller holds `lock`).
+
+        Called by the loop between CAN frames and before each tick, and before a lease query is
+        answered, so a take or release is judged after every command that arrived before it."""
+        self.intake.apply()
+
+    def on_lease_query(self, query) -> None:
+        """Zenoh callback thread: take/release control (lease_queries.py); every query gets a reply."""
+        try:
+            payload = query.payload.to_bytes() if query.payload is not None else b""
+        except Exception:  # noqa: BLE001 — an unreadable payload is answered as an empty (refused) request
+            payload = b""
+        with self.lock:
+            self.apply_commands()
+            reply = lease_queries.answer(payload, self.policy.lease, self.lease_guard, self.policy.rejections,
+                                         time.monotonic(), time.time())
+        try:
+            query.reply(keys.lease_key(self.robot_id), encode_message(reply))
+        except Exception as exc:  # noqa: BLE001 — a vanished querier must not stop anything
+            print(f"sharedctl controller: lease reply not sent: {exc}", file=sys.stderr)
+
+    def emit(self, now: float, topic: str, kind: str, severity: str, text: str) -> None:
+        """An event, at most one per topic per interval (`EventLimiter`); warnings and worse also to stderr."""
+        event = self.events.make(now, time.time(), topic, kind, severity, text)
+        if event is None:
+            return
+        if self.verbose and severity in ("warning", "error", "critical"):
+            print(f"sharedctl controller: {severity}: {event.text}", file=sys.stderr, flush=True)
+        try:
+            self.event_pub.put(encode_message(event))
+        except Exception as exc:  # noqa: BLE001 — telemetry must not stop the loop
+            print(f"sharedctl controller: event not sent: {exc}", file=sys.stderr)
+
+    def undeclare(self) -> None:
+        for entity in (self.subscriber, self.queryable, self.token, self.state_pub, self.event_pub, self.alive_pub):
+            try:
+                entity.undeclare()
+            except Exception:  # noqa: BLE001 — closing anyway
+                pass

@@ -1,0 +1,41 @@
+"""Summaries as JSON (services/summary_output.py): strict (a figure that could not be measured is null) and
+written atomically (a reader finds the old file or the new one, never a part, and no temporary file stays)."""
+import json
+import math
+
+import numpy as np
+import pytest
+
+from sharedctl.services.summary_output import read_json, write_json
+
+
+def strict(text):
+    return json.loads(text, parse_constant=lambda name: pytest.fail(f"{name} in the JSON"))
+
+
+def test_non_finite_numbers_are_written_as_null_and_numpy_scalars_as_numbers(tmp_path):
+    path = tmp_path / "s.json"
+    write_json(path, {"p99_us": math.nan, "max": [math.inf, -math.inf, 1.5], "n": np.int64(3),
+                      "mean": np.float32(0.5), "pair": (1, "a")})
+    assert strict(path.read_text()) == {"p99_us": None, "max": [None, None, 1.5], "n": 3, "mean": 0.5,
+                                        "pair": [1, "a"]}
+
+
+def test_a_summary_replaces_the_old_one_whole_and_leaves_no_temporary_file(tmp_path):
+    path = tmp_path / "s.json"
+    write_json(path, {"ticks": 1})
+    write_json(path, {"ticks": 2})
+    assert read_json(path) == {"ticks": 2} and [p.name for p in tmp_path.iterdir()] == ["s.json"]
+
+
+def test_a_summary_that_cannot_be_written_leaves_the_old_one_as_it_was(tmp_path):
+    path = tmp_path / "s.json"
+    write_json(path, {"ticks": 1})
+    with pytest.raises(TypeError):
+        write_json(path, {"ticks": object()})
+    assert read_json(path) == {"ticks": 1} and [p.name for p in tmp_path.iterdir()] == ["s.json"]
+
+
+def test_a_missing_or_unreadable_summary_reads_as_none(tmp_path):
+    (tmp_path / "half.json").write_text('{"ticks": ')
+    assert read_json(tmp_path / "none.json") is None and read_json(tmp_path / "half.json") is None

@@ -1,0 +1,81 @@
+"""A command whose extra is not installed stops with a message naming the extra, not a traceback."""
+import sys
+import tomllib
+from importlib.metadata import packages_distributions
+from pathlib import Path
+
+import pytest
+from packaging.requirements import Requirement
+from packaging.utils import canonicalize_name
+
+from sharedctl.services import cli
+
+PYPROJECT = tomllib.loads((Path(__file__).resolve().parents[1] / "pyproject.toml").read_text())
+
+
+def extra_of(module: str) -> str:
+    """The extra of pyproject.toml whose requirements include the distribution that provides `module`."""
+    dists = {canonicalize_name(d) for d in packages_distributions()[module]}
+    extras = [name for name, reqs in PYPROJECT["project"]["optional-dependencies"].items()
+              if name != "test" and any(canonicalize_name(Requirement(r).name) in dists for r in reqs)]
+    assert len(extras) == 1, extras
+    return extras[0]
+
+
+def expected(command: str, module: str) -> str:
+    extra = extra_of(module)
+    return (f"sharedctl {command}: needs {module}, which comes with the '{extra}' extra: "
+            f"pip install 'sharedctl[{extra}]'\n")
+
+
+@pytest.fixture
+def without(monkeypatch):
+    """Make `import NAME` fail for the given modules, and forget every study module imported so far."""
+    def block(*names):
+        for key in list(sys.modules):
+            if key.split(".")[0] in names or key.startswith(("sharedctl.services.studies", "sharedctl.baselines")):
+                monkeypatch.delitem(sys.modules, key)
+        for name in names:
+            monkeypatch.setitem(sys.modules, name, None)
+    return block
+
+
+@pytest.mark.parametrize("argv,module", [
+    (["plot", "--out", "figure.png", "run.json"], "matplotlib"),
+    (["plot", "--help"], "matplotlib"),
+    (["compare", "--quick"], "quadprog"),
+])
+def test_a_command_whose_module_needs_a_missing_extra_exits_2_naming_the_extra(without, capsys, argv, module):
+    without(module)
+    assert cli.main(argv) == 2
+    assert capsys.readouterr().err == expected(argv[0], module)
+
+
+def test_a_study_that_imports_its_extra_only_while_running_names_the_extra(without, capsys, tmp_path):
+    without("matplotlib")
+    assert cli.main(["paper", "--out", str(tmp_path)]) == 2
+    assert capsys.readouterr().err == expected("paper", "matplotlib")
+
+
+def test_an_option_that_needs_a_missing_extra_is_refused_before_the_run(without, capsys, tmp_path):
+    without("matplotlib")
+    assert cli.main(["sim", "paper_convex", "--plot", str(tmp_path / "run.png")]) == 2
+    out = capsys.readouterr()
+    assert out.err == expected("sim", "matplotlib")
+    assert out.out == ""                      # the simulation's summary table was never printed
+
+
+def test_help_still_lists_every_command_when_the_extras_are_missing(without, capsys):
+    without("matplotlib", "quadprog")
+    with pytest.raises(SystemExit) as stop:
+        cli.main(["--help"])
+    assert stop.value.code == 0
+    rows = [line.split(None, 1) for line in capsys.readouterr().out.splitlines() if line.startswith("    ")]
+    assert set(cli.COMMANDS) <= {row[0] for row in rows}
+    assert ["plot", "(needs pip install 'sharedctl[plots]')"] in rows
+
+
+def test_a_missing_runtime_module_is_not_mistaken_for_an_extra(without):
+    without("rich")
+    with pytest.raises(ModuleNotFoundError):
+        cli.main(["fuzz", "--count", "1"])
