@@ -40,9 +40,16 @@ def to_json(summary, indent: int = 2, default=None) -> str:
 
 
 def write_json(path, summary, indent: int = 2, default=None) -> None:
-    """`summary` as JSON at `path`, atomically: written to a temporary file in the same folder, then renamed."""
+    """`summary` as JSON at `path`, atomically: written to a temporary file in the same folder, then renamed.
+
+    A `path` that exists and is not a regular file (`/dev/null`, `/dev/stdout`, a named pipe) is written to
+    as it is: renaming a file over a device would replace the device."""
     path = Path(path)
     text = to_json(summary, indent, default) + "\n"
+    if path.exists() and not path.is_file():
+        with open(path, "w") as out:
+            out.write(text)
+        return
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
     try:
         with os.fdopen(fd, "w") as out:

@@ -39,3 +39,21 @@ def test_a_summary_that_cannot_be_written_leaves_the_old_one_as_it_was(tmp_path)
 def test_a_missing_or_unreadable_summary_reads_as_none(tmp_path):
     (tmp_path / "half.json").write_text('{"ticks": ')
     assert read_json(tmp_path / "none.json") is None and read_json(tmp_path / "half.json") is None
+
+
+def test_a_summary_written_to_a_named_pipe_goes_through_it_and_leaves_the_pipe_a_pipe(tmp_path):
+    """`--json /dev/null` or a pipe: the target is written, never replaced by a renamed file."""
+    import os
+    import stat
+    import threading
+
+    pipe = tmp_path / "summary.fifo"
+    os.mkfifo(pipe)
+    received = []
+    reader = threading.Thread(target=lambda: received.append(pipe.read_text()), daemon=True)
+    reader.start()
+    write_json(pipe, {"ticks": 3})
+    reader.join(timeout=5)
+    assert received and json.loads(received[0]) == {"ticks": 3}
+    assert stat.S_ISFIFO(os.stat(pipe).st_mode)
+    assert [p.name for p in tmp_path.iterdir()] == ["summary.fifo"]
