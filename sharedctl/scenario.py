@@ -10,7 +10,7 @@ Keys (all SI; see docs/scenarios.md):
   [human]    kind = "scripted" | "spring", kp, kd
   [sharing]  mode = "shared" | "machine" | "human", b1, b2, b0, blend_time_constant, min_machine_dwell
   [reference] epsilon, gamma
-  [gains.ce] Kp, lam, gamma_theta   [gains.nce] lam, k_q, alpha_n, gamma_n
+  [gains.ce] Kp, lam, gamma_theta   [gains.nce] (over [gains.ce]) Kp, lam, gamma_theta, k_q, alpha_n, gamma_n, nu
   [gains.of] K1, k2, gamma_theta, sign_width   [gains.observer] Ka, Kb, sign_width
   theta_hat0 = [...]  (default zeros, as in the paper)
 """

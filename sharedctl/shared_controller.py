@@ -5,9 +5,10 @@ samples its measurements every period, holds its command, and advances its own s
 (θ̂, the law's filters, the observer) over the period. `SharedController.step` is that: the
 same sharing function (sharing.py), the same laws and the same re-initialisation policy as
 the simulator, with the controller's states advanced by one forward-Euler step of the law's
-own rates at the sampled (q, q̇) (at 500 Hz the fastest controller pole, the observer's
-K_a = 60 s⁻¹, gives K_a·dt = 0.12). State in, command out: `ControllerState` is explicit and
-immutable, so the daemon, a test and a replay all run the same code.
+own rates at the sampled (q, q̇) and the command u_s it returns (at 500 Hz the fastest
+controller pole, the observer's K_a = 60 s⁻¹, gives K_a·dt = 0.12). State in, command out:
+`ControllerState` is explicit and immutable, so the daemon, a test and a replay all run the
+same code.
 """
 from __future__ import annotations
 
@@ -116,12 +117,14 @@ class SharedController:
             c = coordinates(grp, q_list, v_list, operator.desired, self.reference,
                             feasible.group_rows(decision.group, rows))
         previous_law = machine.law(law_role) if law_role is not None else None
-        if engaged and (law_role is None or decision.group_changed or decision.role_changed
-                        or law_role is not decision.role):
+        incoming = machine.law(decision.role)
+        if engaged and (previous_law is None or decision.group_changed or incoming is not previous_law):
             if previous_law is not None:
                 theta_hat = previous_law.estimate(theta_hat, law_state)
             law_role = decision.role
-            law_state = machine.law(law_role).initial_state(model, grp, c, q, v_used, theta_hat)
+            law_state = incoming.initial_state(model, grp, c, q, v_used, theta_hat)
+        elif engaged:
+            law_role = decision.role        # the same law in the other role: its filters carry on
         elif not engaged and previous_law is not None:
             theta_hat = previous_law.estimate(theta_hat, law_state)
             law_role, law_state = None, _EMPTY
@@ -129,12 +132,12 @@ class SharedController:
         u_h = self._zero_force() if mode is Mode.MACHINE else np.asarray(operator.force, float)
         u_f = self._zero_force()
         theta_next, law_next = theta_hat, law_state
+        out = None
         if engaged:
             if c.inside:
                 law = machine.law(law_role)
                 out = law.evaluate(model, grp, c, q, v_used, theta_hat, law_state)
                 u_f = out.u
-                law_next = law_state + dt * out.state_dot if law_state.size else law_state
                 if decision.authority is Authority.MACHINE:
                     theta_next = theta_hat + dt * out.theta_dot
                     if law.projects_estimate:
@@ -142,6 +145,8 @@ class SharedController:
             else:
                 u_f = self.recovery_force(grp, q, v_used)
         u_s = shared_input(decision, u_h, u_f)
+        if out is not None and law_state.size:
+            law_next = law_state + dt * law.with_applied_input(out.state_dot, u_s)   # filters see the applied u_s
 
         observer_next = state.observer + dt * observer.derivative(q, state.observer) if observer else state.observer
         reference = np.array(c.floats.q_r) if engaged else _PickedReference(feasible, decision.situation, every_group)

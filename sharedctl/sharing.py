@@ -57,8 +57,8 @@ class Mode(enum.Enum):
 
 
 class LawRole(enum.IntEnum):
-    TRACKING = 0   # the configured law ((12), (13) or (25))
-    HAZARD = 1     # the law that runs in the hazardous set ((12) when tracking is (13))
+    TRACKING = 0   # the configured law (ce: (12); nce: (12) with the composite update; of: (25))
+    HAZARD = 1     # the law that runs in the hazardous set (the configured one, except (12) on v̂ for of)
 
 
 @dataclass(frozen=True)
@@ -189,9 +189,9 @@ def arbitrate(
           and _clear_of_faces(feasible, state.group, q, params.bands, rows)):
         role = LawRole.TRACKING
     # otherwise hold the role: the hazard law keeps running until the state is safe *and*
-    # outside the inner band of its group (a law-level Schmitt trigger). The tracking law
-    # (13) has no barrier and its gains grow like 1/x² near a face, so it only resumes
-    # where it is well-conditioned.
+    # outside the inner band of its group (a law-level Schmitt trigger). It matters where the two
+    # roles run different laws (of: (25) tracks, (12) on v̂ in the hazardous set, docs/control.md
+    # §4.3): the tracking law resumes only where it is well-conditioned.
 
     # --- group ------------------------------------------------------------------
     group = state.group

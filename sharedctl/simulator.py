@@ -10,7 +10,9 @@ The continuous state is [q, q̇, θ̂, law state, observer state]. Every step of
 When the machine takes over, or changes group or law, the law's filters restart from its
 published initial conditions ((15), (26), (28)) and the shared estimate θ̂ carries over
 (θ̂ + β when leaving (13)). θ̂ adapts only while the machine has full authority: under a
-blended or human input the adaptation laws' premises (u = u_f) do not hold.
+blended or human input the adaptation laws' premises (u = u_f) do not hold. A law's filters
+integrate whenever it is engaged, with the input the plant receives (u_s at every RK stage,
+`MachineLaw.with_applied_input`): the composite law's identity holds for any input.
 """
 from __future__ import annotations
 
@@ -21,21 +23,23 @@ import numpy as np
 from .constraints import FeasibleSet
 from .controllers import (
     CertaintyEquivalentLaw,
+    CompositeAdaptiveLaw,
     MachineLaw,
-    NonCertaintyEquivalentLaw,
     OutputFeedbackLaw,
     VelocityObserver,
 )
 from .human import HumanModel
 from .models import EulerLagrangeModel
 from .reference import ReferenceShape
+from .sets import classify
 from .sharing import ArbiterState, Authority, LawRole, Mode, SharingParameters, arbitrate, select_group, shared_input
 from .transform import all_groups, coordinates
 
 
 @dataclass
 class MachineController:
-    """The machine side: the tracking law, the law for the hazardous set, and the observer."""
+    """The machine side: the tracking law, the law for the hazardous set (the same object when one
+    law serves both roles), and the observer."""
 
     tracking: MachineLaw
     hazard: MachineLaw
@@ -50,11 +54,13 @@ class MachineController:
 
 
 def make_controller(kind: str, gains: dict | None = None, model: EulerLagrangeModel | None = None) -> MachineController:
-    """`ce` → (12) everywhere; `nce` → (13), with (12) in the hazardous set; `of` → (25) with the
-    observer (40), and (12) on the observer's v̂ in the hazardous set (docs/control.md §4.3).
+    """`ce` → (12) everywhere; `nce` → the composite law (12) + prediction error on (14)–(15)'s
+    filters everywhere (docs/control.md §4.2); `of` → (25) with the observer (40), and (12) on the
+    observer's v̂ in the hazardous set (docs/control.md §4.3).
 
     `gains` maps a law ("ce", "nce", "of", "observer") to keyword overrides; they are laid
-    over the model's `default_gains` (gains scale with the plant's inertia).
+    over the model's `default_gains` (gains scale with the plant's inertia). The composite law's
+    (12) part (K_p, λ_q, γ_θ) takes the "ce" table, and the "nce" table over it.
     """
     merged = {k: dict(v) for k, v in getattr(model, "default_gains", {}).items()}
     for law, table in (gains or {}).items():
@@ -64,7 +70,8 @@ def make_controller(kind: str, gains: dict | None = None, model: EulerLagrangeMo
     if kind == "ce":
         return MachineController(ce, ce)
     if kind == "nce":
-        return MachineController(NonCertaintyEquivalentLaw(**gains.get("nce", {})), ce)
+        nce = CompositeAdaptiveLaw(**{**gains.get("ce", {}), **gains.get("nce", {})})
+        return MachineController(nce, nce)
     if kind == "of":
         of = OutputFeedbackLaw(**gains.get("of", {}))
         return MachineController(of, ce, VelocityObserver(**gains.get("observer", {})))
@@ -111,10 +118,15 @@ class Trace:
     finite: bool
     switches: int
     group_switches: int
+    # None where the producer of the trace does not know them:
+    true_class: np.ndarray | None = None   # SetClass of the true (q, q̇) (Definition 2), −1 where no input was recorded
+    own_law: np.ndarray | None = None      # u_f came from the configuration's own law (MachineController.tracking)
+    theta: np.ndarray | None = None        # the plant's true θ
 
 
 class _Recorder:
-    def __init__(self, steps, n, n_theta):
+    def __init__(self, steps, n, n_theta, optional=()):
+        """`optional`: which of true_class, own_law the caller records (the others stay None in the Trace)."""
         def z(*shape):
             return np.full((steps,) + shape, np.nan)
 
@@ -125,14 +137,18 @@ class _Recorder:
         for k in ("authority", "set_class", "group", "role"):
             self.cols[k] = np.full(steps, -1, dtype=int)
         self.cols["inside"] = np.zeros(steps, dtype=bool)
+        if "true_class" in optional:
+            self.cols["true_class"] = np.full(steps, -1, dtype=int)
+        if "own_law" in optional:
+            self.cols["own_law"] = np.zeros(steps, dtype=bool)
 
     def put(self, k, **values):
         for name, value in values.items():
             self.cols[name][k] = value
 
-    def trace(self, steps, finite, switches, group_switches) -> Trace:
+    def trace(self, steps, finite, switches, group_switches, theta=None) -> Trace:
         cols = {name: arr[:steps] for name, arr in self.cols.items()}
-        return Trace(**cols, finite=finite, switches=switches, group_switches=group_switches)
+        return Trace(**cols, finite=finite, switches=switches, group_switches=group_switches, theta=theta)
 
 
 def simulate(loop: ClosedLoop, q0, v0, duration: float, dt: float) -> Trace:
@@ -150,7 +166,7 @@ def simulate(loop: ClosedLoop, q0, v0, duration: float, dt: float) -> Trace:
     law: MachineLaw | None = None
     law_state = np.zeros(0)
     engaged_before = False
-    rec = _Recorder(steps, n, n_theta)
+    rec = _Recorder(steps, n, n_theta, optional=("true_class", "own_law"))
     finite = True
     is_omni = hasattr(model, "wheel_torques")
 
@@ -172,7 +188,8 @@ def simulate(loop: ClosedLoop, q0, v0, duration: float, dt: float) -> Trace:
         s_dot = no_law_rate.get(s_.size)
         if s_dot is None:
             s_dot = no_law_rate[s_.size] = np.zeros(s_.size)
-        if decision.authority is not Authority.HUMAN and decision.group is not None:
+        engaged = decision.authority is not Authority.HUMAN and decision.group is not None
+        if engaged:
             grp = feasible.groups[decision.group]
             c = coordinates(grp, q_, v_meas, desired, loop.reference)
             if not c.inside:
@@ -182,6 +199,8 @@ def simulate(loop: ClosedLoop, q0, v0, duration: float, dt: float) -> Trace:
             if decision.authority is Authority.MACHINE:
                 th_dot = out.theta_dot
         u_s = shared_input(decision, u_h, u_f)
+        if engaged:
+            s_dot = law.with_applied_input(s_dot, u_s)
         acc = model.acceleration(q_, v_, u_s)
         o_dot = observer.derivative(q_, o_) if observer else o_
         derivs = (v_, acc, th_dot, s_dot, o_dot)
@@ -200,7 +219,7 @@ def simulate(loop: ClosedLoop, q0, v0, duration: float, dt: float) -> Trace:
         arbiter, decision = arbitrate(feasible, loop.sharing, arbiter, q, v_meas, intent, dt,
                                       values.__getitem__, ref_ok)
         engaged = decision.authority is not Authority.HUMAN and decision.group is not None
-        if engaged and (not engaged_before or decision.group_changed or decision.role_changed or law is None):
+        if engaged and (not engaged_before or decision.group_changed or ctrl.law(decision.role) is not law):
             if law is not None and law_state.size:
                 theta_hat = law.estimate(theta_hat, law_state)
             law = ctrl.law(decision.role)
@@ -230,6 +249,9 @@ def simulate(loop: ClosedLoop, q0, v0, duration: float, dt: float) -> Trace:
             group=-1 if decision.group is None else decision.group, role=int(decision.role),
             k_h=decision.k_h, k_f=decision.k_f, intent=intent, margin=feasible.margin(q),
             inside=feasible.contains(q),
+            true_class=int(decision.situation.overall if observer is None
+                           else classify(feasible, q, v, loop.sharing.bands).overall),
+            own_law=engaged and law is ctrl.tracking,
         )
 
         state = (q, v, theta_hat, law_state, obs)
@@ -257,7 +279,7 @@ def simulate(loop: ClosedLoop, q0, v0, duration: float, dt: float) -> Trace:
             break
     else:
         k = steps
-    return rec.trace(k, finite, arbiter.switches, arbiter.group_switches)
+    return rec.trace(k, finite, arbiter.switches, arbiter.group_switches, theta=model.theta)
 
 
 class _Escaped(Exception):

@@ -613,74 +613,45 @@ def release_samples(trace: Trace) -> np.ndarray:
 
 
 def transparency_failures(trace: Trace) -> list[str]:
-    """Authority HUMAN ⇒ u_s == u_h exactly."""
+    """Authority HUMAN ⇒ u_s == u_h, value for value."""
     for k in np.flatnonzero(trace.authority == int(Authority.HUMAN)):
         if not np.array_equal(trace.u_s[k], trace.u_h[k]):
             return [f"HUMAN but u_s={trace.u_s[k]} != u_h={trace.u_h[k]} at t={trace.t[k]:.3f}"]
     return []
 
 
-def safe_set_failures(trace: Trace, params: SharingParameters, dt: float) -> list[str]:
-    """SAFE ⇒ HUMAN, unless the machine took over at most min_machine_dwell before.
+def takeover_margin_failures(trace: Trace, params: SharingParameters) -> list[str]:
+    """Every take-over within b1 of the border: trace.margin ≤ b1 at each take-over sample.
 
-    One sample of slack: the arbiter measures its dwell by summing dt, and a float sum can
-    land one ulp short of Δt, so the release can come one sample after Δt.
-    """
-    human = trace.authority == int(Authority.HUMAN)
-    takeovers = takeover_samples(trace)
-    for k in np.flatnonzero(decided(trace) & ~human & (trace.set_class == int(SetClass.SAFE))):
-        before = takeovers[takeovers <= k]
-        since = (k - before[-1]) * dt
-        if since > params.min_machine_dwell + dt * 1.000001:
-            return [f"SAFE but authority {Authority(trace.authority[k]).name} at t={trace.t[k]:.3f}, "
-                    f"{since:.3f} s after the take-over (dwell {params.min_machine_dwell} s)"]
-    return []
-
-
-def hazard_failures(trace: Trace) -> list[str]:
-    """HAZARD ⇒ authority MACHINE, u_s == u_f exactly, k_f == 1."""
-    for k in np.flatnonzero(trace.set_class == int(SetClass.HAZARD)):
-        if (trace.authority[k] != int(Authority.MACHINE) or not np.array_equal(trace.u_s[k], trace.u_f[k])
-                or trace.k_f[k] != 1.0):
-            return [f"HAZARD but authority {Authority(trace.authority[k]).name}, k_f={trace.k_f[k]}, "
-                    f"u_s={trace.u_s[k]}, u_f={trace.u_f[k]} at t={trace.t[k]:.3f}"]
-    return []
-
-
-def blend_failures(trace: Trace) -> list[str]:
-    """SHARED ⇒ k_h + k_f == 1, 0 ≤ k_h ≤ 1, u_s == k_h u_h + k_f u_f.
-
-    k_f is computed as 1 − k_h, so k_h + k_f is 1 up to one rounding (≤ 2⁻⁵³ relative);
-    the blend is compared to ~1e-12 relative for the same reason.
-    """
-    for k in np.flatnonzero(trace.authority == int(Authority.SHARED)):
-        kh, kf = trace.k_h[k], trace.k_f[k]
-        blend = kh * trace.u_h[k] + kf * trace.u_f[k]
-        if not (0.0 <= kh <= 1.0 and abs(kh + kf - 1.0) <= 2.3e-16
-                and np.allclose(trace.u_s[k], blend, rtol=1e-12, atol=1e-12)):
-            return [f"SHARED blend broken at t={trace.t[k]:.3f}: k_h={kh!r}, k_f={kf!r}, "
-                    f"u_s={trace.u_s[k]}, k_h u_h + k_f u_f={blend}"]
-    return []
-
-
-def switching_failures(trace: Trace) -> list[str]:
-    """HUMAN → non-HUMAN only at HAZARD samples; non-HUMAN → HUMAN only at SAFE samples."""
-    out = []
+    Geometry, not the arbiter's classification: a take-over needs a hazardous state, i.e. a row
+    with −b1 ≤ x_j < 0 in every polytope that contains q (or none contains q), so the best
+    region's slack (FeasibleSet.margin, from the rows alone) is at most b1 there."""
+    b1 = params.bands.b1
     for k in takeover_samples(trace):
-        if trace.set_class[k] != int(SetClass.HAZARD):
-            out.append(f"take-over in class {SetClass(trace.set_class[k]).name} at t={trace.t[k]:.3f}")
-            break
+        if not trace.margin[k] <= b1:
+            return [f"take-over at t={trace.t[k]:.3f} with margin {trace.margin[k]:.4g} > b1 = {b1}"]
+    return []
+
+
+def dwell_failures(trace: Trace, params: SharingParameters, dt: float) -> list[str]:
+    """Every release at least ⌈Δt/dt⌉ samples after its take-over (Δt = min_machine_dwell, counted
+    in samples of the trace; the arbiter sums dt, so its release may come one sample later, never earlier)."""
+    takeovers = takeover_samples(trace)
+    shortest = math.ceil(params.min_machine_dwell / dt - 1e-9)
     for k in release_samples(trace):
-        if trace.set_class[k] != int(SetClass.SAFE):
-            out.append(f"release in class {SetClass(trace.set_class[k]).name} at t={trace.t[k]:.3f}")
-            break
-    return out
+        before = takeovers[takeovers < k]
+        if before.size and k - before[-1] < shortest:
+            return [f"release at t={trace.t[k]:.3f}, {(k - before[-1]) * dt:.4f} s after the take-over "
+                    f"(dwell {params.min_machine_dwell} s)"]
+    return []
 
 
 def sharing_failures(trace: Trace, params: SharingParameters, dt: float) -> list[str]:
-    """All the sharing properties at once (see the functions above)."""
-    return (transparency_failures(trace) + safe_set_failures(trace, params, dt) + hazard_failures(trace)
-            + blend_failures(trace) + switching_failures(trace))
+    """The closed-loop sharing properties that need no classification of the state (see the
+    functions above); the decisions per set class are tested on hand-classified states in
+    tests/test_sharing_properties.py."""
+    return (transparency_failures(trace) + takeover_margin_failures(trace, params)
+            + dwell_failures(trace, params, dt))
 
 
 # ----- hypothesis strategies ------------------------------------------------------------------

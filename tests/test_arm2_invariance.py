@@ -64,8 +64,9 @@ def test_random_arm_box_stays_inside(case, controller):
 
 
 def test_arm_sharing_properties_hold():
-    """Transparency, machine authority in the hazardous set, the blend and the Schmitt
-    trigger on one arm run (the L-shaped set, ce law), on every sample the arbiter decided."""
+    """On one arm run (the L-shaped set, ce law): u_s = u_h under operator authority, take-overs
+    only within b1 of a joint limit, releases only after Δt (S.sharing_failures), and at most
+    duration/Δt + 1 interventions."""
     case = S.arm_union_case()
     trace = S.run(case, "ce")
     assert np.any(trace.set_class == int(SetClass.HAZARD))

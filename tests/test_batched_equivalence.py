@@ -52,7 +52,7 @@ def _assert_same(loops, q0, v0, duration=DURATION):
         for name in ("u_h", "u_f", "u_s", "tau"):
             np.testing.assert_allclose(getattr(got, name), getattr(ref, name), rtol=0, atol=FORCE_TOL,
                                        err_msg=f"robot {i} {name}")
-        for name in ("authority", "group", "role", "set_class", "inside"):
+        for name in ("authority", "group", "role", "set_class", "inside", "true_class", "own_law"):
             np.testing.assert_array_equal(getattr(got, name), getattr(ref, name), err_msg=f"robot {i} {name}")
         assert (got.switches, got.group_switches, got.finite) == (ref.switches, ref.group_switches, ref.finite)
         expected = summarize(ref, DT)

@@ -2,8 +2,8 @@
 
 The safety property: from any initial state inside Q_a, whatever the operator commands,
 every sample of the closed loop stays inside Q_a (trace.inside all True), every signal stays
-finite and the run completes — for the three machine controllers ce (12), nce (13) with (12)
-in the hazardous set, and of (25)+(40).
+finite and the run completes — for the three machine controllers ce (12), nce ((12) with the composite update on the
+filters (14)–(15), in both roles), and of (25)+(40).
 
 Runs use dt = 2e-3 (the plant is integrated by RK4 at the control period).
 

@@ -1,7 +1,8 @@
 """The shared controller's step reproduces its recorded reference outputs (tests/fixtures).
 
-The fixture holds closed-loop trajectories recorded before the step's hot path was optimised
-(tests/fixtures/make_shared_step_reference.py). Replaying the recorded (q, q̇) open loop through
+The fixture holds closed-loop trajectories (tests/fixtures/make_shared_step_reference.py): the ce
+and of runs recorded before the step's hot path was optimised, the nce runs with the composite law
+of docs/control.md §4.2 (`--laws nce`). Replaying the recorded (q, q̇) open loop through
 `SharedController.step`, every output must match to 1e-12 relative (scaled by the signal's
 largest magnitude), and every discrete decision exactly.
 """

@@ -30,7 +30,7 @@ SET_CLASS = {0: ("safe", "#b7e1a1"), 1: ("hysteresis", "#fdd49e"), 2: ("hazard",
 LAW_ROLE = {0: ("tracking role", "#9467bd"), 1: ("hazard role", "#8c2d04")}   # while engaged; nce's hazard law is (12)
 CONTROLLERS = {  # colour, the paper's law, a short legend label
     "ce": ("#1f77b4", "(46) with (12), certainty-equivalent", "(46)+(12) certainty-equiv."),
-    "nce": ("#2ca02c", "(46) with (13), non-certainty-equivalent", "(46)+(13) non-certainty-equiv."),
+    "nce": ("#2ca02c", "(46) with NCE: (12) and a composite update on the filters (14)–(15)", "(46)+NCE composite"),
     "of": ("#9467bd", "(47) with (25)–(29), output feedback + observer (40)", "(47) output feedback"),
 }
 FEASIBLE_FILL, OBSTACLE_FILL = "#e3f2dc", "#e6e6e6"

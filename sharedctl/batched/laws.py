@@ -6,7 +6,8 @@ Every function takes the robots' own group matrices gathered per robot — K, T,
 operations) are those of the scalar laws:
 
 * (12) certainty equivalent: u_f = −K_p p − Kᵀ(z/x) + Y θ̂, θ̂̇ = −Yᵀp/γ_θ;
-* (13)–(15) non-certainty equivalent, state [p_n, W_n];
+* the composite law of the NCE configuration ((12) + prediction error on (14)–(15)'s filters),
+  state [p_n, W_n, u_n];
 * (25)–(29) output feedback, state [z_f, ξ];
 * (40) the velocity observer on q, state [q̂, β_o].
 """
@@ -16,7 +17,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..controllers import CertaintyEquivalentLaw, NonCertaintyEquivalentLaw, OutputFeedbackLaw, VelocityObserver
+from ..controllers import CertaintyEquivalentLaw, CompositeAdaptiveLaw, OutputFeedbackLaw, VelocityObserver
 from ..controllers.base import diag_gain
 from . import plant
 from .geometry import saturate
@@ -143,6 +144,7 @@ class CertaintyEquivalent:
 
     state_size = 0
     projects_estimate = True
+    applied_input = None          # rows of the state that filter u_s (none)
 
     def __init__(self, law: CertaintyEquivalentLaw, n: int):
         self.lam = law.lam
@@ -166,50 +168,58 @@ class CertaintyEquivalent:
         return theta_hat
 
 
-class NonCertaintyEquivalent:
-    """(13)–(15); state rows [p_n (n), W_n (n·n_θ, row-major)]."""
+class CompositeAdaptive:
+    """(12) with the composite update on (14)–(15)'s filters; state rows [p_n (n), W_n (n·n_θ,
+    row-major), u_n (n)]. `evaluate`'s rate leaves out u_s; the step adds it to the rows
+    `applied_input` (CompositeAdaptiveLaw.with_applied_input)."""
 
-    projects_estimate = False
+    projects_estimate = True
 
-    def __init__(self, law: NonCertaintyEquivalentLaw, n: int, n_theta: int):
-        self.lam, self.k_q, self.alpha, self.gamma = law.lam, law.k_q, law.alpha_n, law.gamma_n
+    def __init__(self, law: CompositeAdaptiveLaw, n: int, n_theta: int):
+        self.lam, self.k_q, self.alpha = law.lam, law.k_q, law.alpha_n
+        self.gamma_theta, self.gamma_n, self.nu = law.gamma_theta, law.gamma_n, law.nu
+        self.minus_kp = -diag_gain(law.Kp, n)[:, None]
         self.n, self.k = n, n_theta
-        self.state_size = n + n * n_theta
-
-    def _split(self, state):
-        n, k = self.n, self.k
-        return state[:n], state[n:].reshape((n, k) + state.shape[1:])
+        self.state_size = 2 * n + n * n_theta
+        self.applied_input = slice(n + n * n_theta, self.state_size)
 
     def initial_state(self, z, p):
-        """(15): p_n(0) = p(0)/(α_n − k_q), W_n(0) = 0; `p` is p at the take-over."""
+        """(15): p_n(0) = p(0)/(α_n − k_q), W_n(0) = 0; u_n(0) = 0. `p` is p at the take-over."""
         out = np.zeros((self.state_size, p.shape[1]))
         out[: self.n] = p / (self.alpha - self.k_q)
         return out
 
     def evaluate(self, frame, c, v, theta_hat, state):
-        p_n, W_n = self._split(state)
+        n, k = self.n, self.k
+        p_n, u_n = state[:n], state[self.applied_input]
+        W_n = state[n: n + n * k].reshape((n, k) + state.shape[1:])
         p, v_ref, a_ref = _error_signals(frame, c, v, self.lam)
-        W = plant.nce_regressor(v, p, v_ref, a_ref, self.k_q)
+        u = np.multiply(self.minus_kp, p)
+        u -= rmatvec(frame.K, np.divide(c.z, c.x))
+        u += plant.regressor_times(v, v_ref, a_ref, theta_hat)
         s = p + (self.k_q - self.alpha) * p_n
-        g = self.gamma
-        beta = g * rmatvec(W_n, p_n)
-        u = matvec(-W, theta_hat + beta) - g * matvec(W_n, rmatvec(W_n, s))
-        theta_dot = g * rmatvec(self.alpha * W_n - W, p_n) + g * self.k_q * rmatvec(W_n, p_n)
+        W = plant.nce_regressor(v, p, v_ref, a_ref, self.k_q)
+        Phi = plant.mass_regressor(s) - W_n
+        error = matvec(Phi, theta_hat) - u_n                                   # Φ θ̂ − u_n
+        gain = self.gamma_n / (1.0 + self.nu * np.sum(np.square(Phi), axis=(0, 1)))
+        theta_dot = plant.regressor_transpose_times(v, v_ref, a_ref, p)
+        theta_dot /= -self.gamma_theta
+        theta_dot -= gain * rmatvec(Phi, error)
         rate = np.empty_like(state)
-        rate[: self.n] = -self.alpha * p_n + p
-        rate[self.n:] = (-self.alpha * W_n + W).reshape(self.n * self.k, -1)
+        rate[:n] = -self.alpha * p_n + p
+        rate[n: n + n * k] = (-self.alpha * W_n + W).reshape(n * k, -1)
+        rate[self.applied_input] = -self.alpha * u_n
         return u, theta_dot, rate
 
     def estimate(self, theta_hat, state):
-        """θ̂ + β, β = γ_n W_nᵀ p_n."""
-        p_n, W_n = self._split(state)
-        return theta_hat + self.gamma * rmatvec(W_n, p_n)
+        return theta_hat
 
 
 class OutputFeedback:
     """(25)–(29); state rows [z_f (n), ξ (n)]."""
 
     projects_estimate = True
+    applied_input = None
 
     def __init__(self, law: OutputFeedbackLaw, n: int):
         self.n = n

@@ -5,7 +5,7 @@ The regressor Y(q, v, w, a) θ = M a + C(q, v) w + g of (11) is
 
     Y = [[a₀, 0, ψ̇ w₁], [a₁, 0, −ψ̇ w₀], [0, a₂, 0]],   ψ̇ = v₂,
 
-so every product the laws need (Y θ̂, Yᵀ p, and the matrix W of (14)) is a handful of
+so every product the laws need (Y θ̂, Yᵀ p, Y_M, and the matrix W of (14)) is a handful of
 elementwise operations on (3, N) arrays. Each robot may have its own true θ (mass, inertia).
 """
 from __future__ import annotations
@@ -64,6 +64,13 @@ def regressor_transpose_times(v, w, a, p) -> np.ndarray:
     t *= p[1]
     out[2] -= t
     return out
+
+
+def mass_regressor(a) -> np.ndarray:
+    """Y_M(q, a) with Y_M θ = M a for every robot: [[a₀, 0, 0], [a₁, 0, 0], [0, a₂, 0]], shape (3, 3, N)."""
+    Y = np.zeros((3, 3) + a.shape[1:])
+    Y[0, 0], Y[1, 0], Y[2, 1] = a[0], a[1], a[2]
+    return Y
 
 
 def nce_regressor(v, p, v_ref, a_ref, k_q: float) -> np.ndarray:

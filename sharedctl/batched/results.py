@@ -3,8 +3,8 @@
 `metrics.summarize` reads a finished Trace; a batch of thousands of robots cannot keep every
 trace, so `Tally` folds each recorded row into running figures that give the same fields:
 violations, min_margin, tracking_rmse, final_error, human_authority, switches, group_switches,
-min_dwell, theta_hat, finite, steps, duration. `Recording` keeps the Trace columns instead, for
-a comparison with the scalar simulator.
+min_dwell, theta_hat, transparency, law_share, theta_error, finite, steps, duration. `Recording`
+keeps the Trace columns instead, for a comparison with the scalar simulator.
 """
 from __future__ import annotations
 
@@ -12,10 +12,13 @@ from dataclasses import dataclass, fields
 
 import numpy as np
 
+from ..metrics import equal_inputs, theta_error
+from ..sets import SetClass
 from ..simulator import Trace
 from . import plant
 
 HUMAN = 0
+SAFE = int(SetClass.SAFE)
 
 
 @dataclass
@@ -31,7 +34,8 @@ class Rows:
     authority: np.ndarray  # (M,) −1 on a row recorded at an escape
     margin: np.ndarray
     inside: np.ndarray
-    # the remaining Trace columns (v_hat, q_d, u_h, u_f, set_class, group, role, k_h, k_f, intent)
+    # the remaining Trace columns (v_hat, q_d, u_h, u_f, set_class, group, role, k_h, k_f, intent,
+    # true_class, own_law)
     extra: dict
 
 
@@ -51,13 +55,18 @@ class Tally:
     min_dwell_steps: np.ndarray
     rows_finite: np.ndarray
     theta_hat: np.ndarray
+    safe_rows: np.ndarray          # rows with the true state in O_s …
+    transparent_rows: np.ndarray   # … and u_s = u_h there (metrics.equal_inputs)
+    machine_rows: np.ndarray       # rows with machine authority (MACHINE or SHARED) …
+    own_law_rows: np.ndarray       # … and u_f from the configuration's own law
 
     @staticmethod
     def empty(M: int, n_theta: int) -> "Tally":
         return Tally(np.zeros(M, np.int64), np.zeros(M, np.int64), np.full(M, np.inf), np.zeros(M),
                      np.zeros(M, np.int64), np.full(M, np.nan), np.zeros(M, np.int64), np.zeros(M, bool),
                      np.full(M, -1, np.int64),
-                     np.full(M, np.iinfo(np.int64).max), np.ones(M, bool), np.full((n_theta, M), np.nan))
+                     np.full(M, np.iinfo(np.int64).max), np.ones(M, bool), np.full((n_theta, M), np.nan),
+                     *(np.zeros(M, np.int64) for _ in range(4)))
 
     def take(self, index) -> "Tally":
         return Tally(*(getattr(self, f.name)[..., index] for f in fields(self)))
@@ -82,6 +91,12 @@ class Tally:
         self.human_rows[cols] += human
         self.rows_finite[cols] &= np.all(np.isfinite(r.q) & np.isfinite(r.v) & np.isfinite(r.u_s), axis=0)
         self.theta_hat[:, cols] = r.theta_hat
+        safe = r.extra["true_class"] == SAFE
+        self.safe_rows[cols] += safe
+        self.transparent_rows[cols] += safe & equal_inputs(r.u_s, r.extra["u_h"], axis=0)
+        machine = r.authority > HUMAN                 # MACHINE or SHARED (−1 on a row recorded at an escape)
+        self.machine_rows[cols] += machine
+        self.own_law_rows[cols] += machine & r.extra["own_law"]
         self.rows[cols] = row + 1
 
 
@@ -100,8 +115,11 @@ class BatchResult:
     group_switches: np.ndarray
     min_dwell: np.ndarray          # s, NaN where fewer than two authority changes
     theta_hat: np.ndarray          # (N, n_θ)
+    transparency: np.ndarray       # NaN where no sample was safe
+    law_share: np.ndarray          # NaN where the machine never had authority
     finite: np.ndarray
     recording: "Recording | None" = None
+    theta: np.ndarray | None = None   # (N, n_θ) the plants' true θ
 
     @property
     def size(self) -> int:
@@ -120,6 +138,9 @@ class BatchResult:
             "group_switches": int(self.group_switches[i]),
             "min_dwell": None if np.isnan(dwell) else float(dwell),
             "theta_hat": [float(x) for x in self.theta_hat[i]],
+            "transparency": None if np.isnan(self.transparency[i]) else float(self.transparency[i]),
+            "law_share": None if np.isnan(self.law_share[i]) else float(self.law_share[i]),
+            "theta_error": theta_error(self.theta_hat[i], None if self.theta is None else self.theta[i]),
             "finite": bool(self.finite[i]),
             "steps": int(self.steps[i]),
             "duration": float(self.steps[i] * self.dt),
@@ -133,32 +154,39 @@ class BatchResult:
         if self.recording is None:
             raise ValueError("this batch was run without record=True")
         return self.recording.trace(i, int(self.steps[i]), bool(self.finite_flag[i]), int(self.switches[i]),
-                                    int(self.group_switches[i]), model)
+                                    int(self.group_switches[i]), model,
+                                    model.theta if self.theta is None else self.theta[i])
 
     finite_flag: np.ndarray | None = None   # Trace.finite (no non-finite state was integrated)
 
 
-def finish(dt: float, tally: Tally, switches, group_switches, trace_finite, recording=None) -> BatchResult:
-    """Turn the (flushed, whole-batch) tally into per-robot summaries."""
+def finish(dt: float, tally: Tally, switches, group_switches, trace_finite, recording=None,
+           theta=None) -> BatchResult:
+    """Turn the (flushed, whole-batch) tally into per-robot summaries; `theta` (n_θ, N): the true θ."""
     rows = tally.rows
     with np.errstate(invalid="ignore", divide="ignore"):
         rmse = np.where(tally.err_count > 0, np.sqrt(tally.err_sq / np.maximum(tally.err_count, 1)), np.nan)
     unset = tally.min_dwell_steps == np.iinfo(np.int64).max
     dwell = np.where(unset, np.nan, tally.min_dwell_steps.astype(float) * dt)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        transparency = np.where(tally.safe_rows > 0, tally.transparent_rows / np.maximum(tally.safe_rows, 1), np.nan)
+        law_share = np.where(tally.machine_rows > 0, tally.own_law_rows / np.maximum(tally.machine_rows, 1), np.nan)
     return BatchResult(
         dt=dt, steps=rows.copy(), violations=tally.violations.copy(),
         min_margin=np.where(rows > 0, tally.min_margin, np.nan), tracking_rmse=rmse,
         final_error=tally.final_error.copy(),
         human_authority=np.where(rows > 0, tally.human_rows / np.maximum(rows, 1), 0.0),
         switches=np.asarray(switches).copy(), group_switches=np.asarray(group_switches).copy(), min_dwell=dwell,
-        theta_hat=tally.theta_hat.T.copy(), finite=np.asarray(trace_finite) & tally.rows_finite,
-        recording=recording, finite_flag=np.asarray(trace_finite).copy(),
+        theta_hat=tally.theta_hat.T.copy(), transparency=transparency, law_share=law_share,
+        finite=np.asarray(trace_finite) & tally.rows_finite,
+        recording=recording, theta=None if theta is None else np.asarray(theta, float).T.copy(),
+        finite_flag=np.asarray(trace_finite).copy(),
     )
 
 
 _VECTORS = ("q", "v", "v_hat", "q_d", "q_r", "u_h", "u_f", "u_s")
 _SCALARS = ("k_h", "k_f", "intent", "margin")
-_LABELS = ("authority", "set_class", "group", "role")
+_LABELS = ("authority", "set_class", "group", "role", "true_class")
 
 
 class Recording:
@@ -171,6 +199,7 @@ class Recording:
         self.cols.update({k: np.full((steps, N), np.nan) for k in _SCALARS})
         self.cols.update({k: np.full((steps, N), -1, dtype=int) for k in _LABELS})
         self.cols["inside"] = np.zeros((steps, N), dtype=bool)
+        self.cols["own_law"] = np.zeros((steps, N), dtype=bool)
 
     def put(self, k: int, ids: np.ndarray, r: Rows) -> None:
         self.t[k, ids] = r.t
@@ -179,8 +208,9 @@ class Recording:
         for name, value in values.items():
             self.cols[name][k, ..., ids] = value.T if np.ndim(value) == 2 else value
 
-    def trace(self, i: int, steps: int, finite: bool, switches: int, group_switches: int, model) -> Trace:
+    def trace(self, i: int, steps: int, finite: bool, switches: int, group_switches: int, model,
+              theta=None) -> Trace:
         cols = {name: (arr[:steps, ..., i]) for name, arr in self.cols.items()}
         tau = plant.wheel_torques(cols["q"], cols["u_s"], model)
         return Trace(t=self.t[:steps, i], tau=tau, **cols, finite=finite, switches=switches,
-                     group_switches=group_switches)
+                     group_switches=group_switches, theta=theta)

@@ -13,10 +13,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..controllers import CertaintyEquivalentLaw, NonCertaintyEquivalentLaw, OutputFeedbackLaw
+from ..controllers import CertaintyEquivalentLaw, CompositeAdaptiveLaw, OutputFeedbackLaw
 from .arbiter import ArbiterArrays
 from .geometry import GroupTable
-from .laws import CertaintyEquivalent, NonCertaintyEquivalent, Observer, OutputFeedback
+from .laws import CertaintyEquivalent, CompositeAdaptive, Observer, OutputFeedback
 from .problem import BatchProblem, StateLayout
 from .results import BatchResult, Recording, Tally, finish
 from .step import StepKernel
@@ -42,7 +42,7 @@ def simulate_batch(problem: BatchProblem, duration: float, dt: float, record: bo
         for start in range(0, N, chunk):
             ids = np.arange(start, min(N, start + chunk))
             engine.run(problem.take(ids), ids, steps, out, recording)
-    return finish(dt, out.tally, out.switches, out.group_switches, out.finite, recording)
+    return finish(dt, out.tally, out.switches, out.group_switches, out.finite, recording, problem.theta)
 
 
 def _keep_heap_mapped() -> None:
@@ -61,8 +61,8 @@ def _keep_heap_mapped() -> None:
 def _vector_law(law, n: int, n_theta: int):
     if isinstance(law, CertaintyEquivalentLaw):
         return CertaintyEquivalent(law, n)
-    if isinstance(law, NonCertaintyEquivalentLaw):
-        return NonCertaintyEquivalent(law, n, n_theta)
+    if isinstance(law, CompositeAdaptiveLaw):
+        return CompositeAdaptive(law, n, n_theta)
     if isinstance(law, OutputFeedbackLaw):
         return OutputFeedback(law, n)
     raise TypeError(f"no batched form of {type(law).__name__}")
@@ -83,6 +83,7 @@ class Engine:
         self.laws = (tracking, hazard)                        # by LawRole
         self.distinct = list(dict.fromkeys(self.laws))
         self._serves = np.array([[law is self.laws[r] for r in (0, 1)] for law in self.distinct])
+        self.law_of_role = np.array([self.distinct.index(law) for law in self.laws])   # by LawRole: distinct index
         self.state_size = np.array([law.state_size for law in self.laws])
         self.projects = np.array([law.projects_estimate for law in self.laws])
         self.observer = Observer(controller.observer, self.n) if controller.observer else None

@@ -19,7 +19,8 @@ import numpy as np
 from ..sharing import Mode
 from .arbiter import HUMAN, MACHINE, arbitrate
 from .geometry import (
-    all_groups, classify, missed_rows, projected_configuration, reference_inside, row_reference, select_group,
+    RowValues, all_groups, classify, missed_rows, projected_configuration, reference_inside, row_reference,
+    select_group,
 )
 from .laws import GroupFrame, coordinates, gather, projected_reference, scatter
 from .plant import acceleration, project
@@ -70,7 +71,8 @@ class StepKernel:
 
         # --- law (re)initialisation, as in simulator.simulate --------------------------------
         engaged = (dec.authority != HUMAN) & (dec.group >= 0)
-        reinit = engaged & (~fleet.engaged_before | dec.group_changed | dec.role_changed | (fleet.law_role < 0))
+        law_changed = (fleet.law_role < 0) | (e.law_of_role[dec.role] != e.law_of_role[np.maximum(fleet.law_role, 0)])
+        reinit = engaged & (~fleet.engaged_before | dec.group_changed | law_changed)
         release = ~engaged & fleet.engaged_before & fleet.has_state
         carry = (reinit | release) & fleet.has_state
         if carry.any():
@@ -216,6 +218,10 @@ class StepKernel:
                 scatter(out[L.theta], sel, theta_dot)
             elif mach.any():
                 scatter(out[L.theta], sel, np.where(mach, theta_dot, 0.0))
+        for law, _, sel, _, _ in plan:
+            if law.applied_input is not None:                   # a filter of u_s (with_applied_input)
+                rows = slice(L.law_state.start + law.applied_input.start, L.law_state.start + law.applied_input.stop)
+                scatter(out[rows], sel, gather(out[rows], sel) + gather(u_s, sel))
         acceleration(fleet.theta, v, u_s, out[L.v])
         if e.observer:
             e.observer.derivative(q, obs, out[L.obs])
@@ -240,7 +246,9 @@ class StepKernel:
         q_r = projected_configuration(self.e.table, groups.rows.shifted_reference, ref_group)
         estimate = self.estimate(fleet, Y[L.theta], Y[L.law_state])
         extra = {"v_hat": v_meas, "q_d": wish.q, "u_h": u_h, "u_f": u_f, "set_class": dec.overall, "group": dec.group,
-                 "role": dec.role, "k_h": dec.k_h, "k_f": dec.k_f, "intent": intent}
+                 "role": dec.role, "k_h": dec.k_h, "k_f": dec.k_f, "intent": intent,
+                 "true_class": self.true_class(Y, groups, situation),
+                 "own_law": engaged & self.e.runs(0, dec.role)}          # distinct law 0 is the tracking law
         rows = Rows(t, Y[L.q], Y[L.v], q_r, u_s, estimate, dec.authority, situation.margin, situation.inside, extra)
         if escaped.any():
             # simulator.simulate records only t, q, v, margin and inside when the first stage escapes
@@ -250,11 +258,22 @@ class StepKernel:
                 setattr(rows, name, arr)
             rows.authority = np.where(escaped, -1, rows.authority)
             for name, value in extra.items():
-                labels = name in ("set_class", "group", "role")
+                if name == "own_law":
+                    extra[name] = value & ~escaped
+                    continue
+                labels = name in ("set_class", "group", "role", "true_class")
                 value = np.array(value, dtype=int if labels else float)
                 value[..., escaped] = -1 if labels else np.nan
                 extra[name] = value
         return rows
+
+    def true_class(self, Y, groups, situation):
+        """Definition 2's class of the true state (q, q̇): the arbiter's, unless it sees the observer's v̂."""
+        if not self.e.observer:
+            return situation.overall
+        rows = groups.rows
+        true_rows = RowValues(rows.x, self.e.table.row_K @ Y[self.e.layout.v], rows.z, rows.shifted_reference)
+        return classify(self.e.table, true_rows, self.e.sharing.bands).overall
 
     def escape_rows(self, t, q, v):
         """The row simulator.simulate records for a state an RK stage reached outside the group."""
@@ -265,7 +284,7 @@ class StepKernel:
         nan_n = np.full((e.n, M), np.nan)
         extra = {"v_hat": nan_n, "q_d": nan_n, "u_h": nan_n, "u_f": nan_n, "set_class": np.full(M, -1),
                  "group": np.full(M, -1), "role": np.full(M, -1), "k_h": np.full(M, np.nan), "k_f": np.full(M, np.nan),
-                 "intent": np.full(M, np.nan)}
+                 "intent": np.full(M, np.nan), "true_class": np.full(M, -1), "own_law": np.zeros(M, bool)}
         return Rows(t, q, v, nan_n, nan_n, np.full((e.k, M), np.nan), np.full(M, -1), margin, inside, extra)
 
 

@@ -1,6 +1,7 @@
 """Machine controllers, one law per constraint group (paper Section 3)."""
 from .base import LawOutput, MachineLaw
 from .certainty_equivalent import CertaintyEquivalentLaw
+from .composite_adaptive import CompositeAdaptiveLaw
 from .non_certainty_equivalent import NonCertaintyEquivalentLaw
 from .output_feedback import OutputFeedbackLaw
 from .observer import VelocityObserver
@@ -9,6 +10,7 @@ __all__ = [
     "LawOutput",
     "MachineLaw",
     "CertaintyEquivalentLaw",
+    "CompositeAdaptiveLaw",
     "NonCertaintyEquivalentLaw",
     "OutputFeedbackLaw",
     "VelocityObserver",

@@ -44,7 +44,16 @@ class MachineLaw(ABC):
 
     @abstractmethod
     def evaluate(self, model, group: ConstraintGroup, c: GroupCoordinates, q, v, theta_hat, state) -> LawOutput:
-        """u_f, θ̂̇ and the state rate at one instant."""
+        """u_f, θ̂̇ and the state rate at one instant (the rate without the applied input: see
+        `with_applied_input`)."""
+
+    def with_applied_input(self, state_dot: np.ndarray, u_applied: np.ndarray) -> np.ndarray:
+        """The state rate once the input the plant receives, u_s of (46)/(47), is known.
+
+        u_s depends on u_f (the blend), so it is known only after `evaluate`; a law that filters the
+        applied input (the composite law's u_n) adds it here. Every caller that integrates a law's
+        state calls this with u_s, in every sample and RK stage the law is engaged."""
+        return state_dot
 
     def estimate(self, theta_hat: np.ndarray, state: np.ndarray) -> np.ndarray:
         """The parameter estimate this law currently stands for (θ̂, or θ̂ + β for (13))."""

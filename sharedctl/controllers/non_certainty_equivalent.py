@@ -1,4 +1,4 @@
-"""Non-certainty-equivalent (immersion-and-invariance style) adaptive law (paper (13)–(15)).
+"""The paper's non-certainty-equivalent (immersion-and-invariance style) law, as printed ((13)–(15)).
 
 Regressor W (14):  W θ = Ṁ s + k_q M p − C(q, v) p − Y θ,   s = p + (k_q − α_n) p_n.
 Filters (14):      ṗ_n = −α_n p_n + p,      Ẇ_n = −α_n W_n + W.
@@ -7,14 +7,16 @@ Law (13):          β = γ_n W_nᵀ p_n,
                    θ̂̇ = γ_n (α_n W_n − W)ᵀ p_n + γ_n k_q W_nᵀ p_n.
 Initial state (15): p_n(0) = p(0)/(α_n − k_q), W_n(0) = 0 (α_n ≠ k_q).
 
-With these, M (ṗ_n + k_q p_n) = W_n θ + u_n and u_n = −W_n (θ̂ + β) hold for all time,
-so with θ̃ = θ̂ + β − θ:  ṗ_n = −k_q p_n − M⁻¹ W_n θ̃ and θ̃̇ = −γ_n W_nᵀ M⁻¹ W_n θ̃.
-The estimate this law stands for is θ̂ + β.
+For any input u, M s = W_n θ + u_n with u̇_n = −α_n u_n + u (composite_adaptive.py derives it);
+θ̂̇ + β̇ = γ_n W_nᵀ s whatever u is. Only when u is exactly (13) is u_n = −W_n (θ̂ + β), and
+only then, with θ̃ = θ̂ + β − θ, θ̃̇ = −γ_n W_nᵀ M⁻¹ W_n θ̃ (the paper's error dynamics); an added
+term u_b adds γ_n W_nᵀ M⁻¹ u_{b,n}, with M unknown. The estimate this law stands for is θ̂ + β.
 
-This law has no term that grows near a face, so on its own it does not keep the state
-inside (docs/control.md §4.2 and tests/test_non_certainty_equivalent.py show a crossing). The sharing
-arbiter therefore never applies it in the hazardous set: there the certainty-equivalent
-law (12) takes over, seeded with θ̂ + β.
+This law has no term that grows near a face, so it does not keep the state inside
+(tests/test_non_certainty_equivalent.py shows a crossing from speed). No configuration runs
+it: the NCE configuration runs CompositeAdaptiveLaw (composite_adaptive.py) on the same
+filters, with (12)'s barrier (docs/control.md §4.2). It is kept as the paper's law, for the
+tests that document why.
 """
 from __future__ import annotations
 
@@ -27,15 +29,23 @@ from ..transform import reference_signals
 from .base import LawOutput, MachineLaw
 
 
+def filtered_regressor_rows(model, q: list, v: list, p: list, s: list, Y: list, k_q: float) -> list:
+    """W of (14) by rows, on floats: Y_Ṁ(q, v, s) + k_q Y_M(q, p) − Y_C(q, v, p) − Y, with
+    Y = Y(q, v, v_ref, v̇_ref) the regressor of (11) already evaluated."""
+    return [[mr + k_q * m - cr - y for mr, m, cr, y in zip(*rows)] for rows in zip(
+        model.mass_rate_regressor_rows(q, v, s), model.mass_regressor_rows(q, p),
+        model.coriolis_regressor_rows(q, v, p), Y)]
+
+
 @dataclass
 class NonCertaintyEquivalentLaw(MachineLaw):
-    """(13)–(15). Gains: λ_q, k_q, α_n, γ_n (paper: γ_n ≥ 1/k_q)."""
+    """(13)–(15) as printed. Gains: λ_q, k_q, α_n, γ_n (paper: γ_n ≥ 1/k_q)."""
 
     lam: float = 1.5
     k_q: float = 1.0
     alpha_n: float = 3.0
     gamma_n: float = 200.0
-    name: str = field(default="nce", init=False)
+    name: str = field(default="nce13", init=False)
     projects_estimate: bool = field(default=False, init=False)
 
     def __post_init__(self):
@@ -75,9 +85,7 @@ class NonCertaintyEquivalentLaw(MachineLaw):
         kq, alpha, g = self.k_q, self.alpha_n, self.gamma_n
         s = [pj + (kq - alpha) * pnj for pj, pnj in zip(p, p_n)]
         q = floats(q)
-        W = [[mr + kq * m - cr - y for mr, m, cr, y in zip(*rows)] for rows in zip(       # W of (14)
-            model.mass_rate_regressor_rows(q, v, s), model.mass_regressor_rows(q, p),
-            model.coriolis_regressor_rows(q, v, p), model.regressor_rows(q, v, v_ref, a_ref))]
+        W = filtered_regressor_rows(model, q, v, p, s, model.regressor_rows(q, v, v_ref, a_ref), kq)
         W_n_columns = list(zip(*W_n))
         wp = [dot(column, p_n) for column in W_n_columns]                                 # W_nᵀ p_n
         estimate = [th + g * b for th, b in zip(floats(theta_hat), wp)]                    # θ̂ + β

@@ -112,7 +112,6 @@ def run(args) -> int:
             "parameter_names": list(r.loop.model.parameter_names),
             "theta_true": [float(x) for x in r.loop.model.theta],
             "dt": scenarios[name].dt,
-            "configured_law_share": configured_law_share(r.trace, r.loop),
         })
     ok = all(rec["violations"] == 0 and rec["finite"] for rec in records)
     document = _plain({"ok": ok, "runs": records, "figures": figures})
@@ -137,19 +136,6 @@ def _run_all(jobs, duration, workers):
             yield futures[future], future.result()
     finally:
         pool.shutdown(wait=True, cancel_futures=True)
-
-
-def configured_law_share(trace, loop) -> float | None:
-    """Fraction of machine-engaged samples that ran the configured law (nce runs (12) in the hazard role)."""
-    from sharedctl.services.studies.figures import machine_law_role
-
-    role = machine_law_role(trace)
-    engaged = role >= 0
-    if not engaged.any():
-        return None
-    if loop.controller.hazard is loop.controller.tracking:
-        return 1.0
-    return float(sum(role[engaged] == 0) / engaged.sum())
 
 
 def _short(scenario_name: str) -> str:
@@ -217,10 +203,10 @@ def summary_markdown(records: list[dict], figures: list[dict], args, ok: bool) -
 
 
 def _law_notes(records: list[dict]) -> list[str]:
-    """Say plainly when a run's configured law never ran (the machine only ran the hazard law (12))."""
-    notes = [f"- {r['scenario']} {r['controller']}: the machine was engaged, but always in the hazard role, so its "
-             f"configured law never ran — the run is driven by (12) alone." for r in records
-             if r.get("configured_law_share") == 0.0]
+    """Say plainly when a run's configured law never ran while the machine acted (`law_share` 0: another law did)."""
+    notes = [f"- {r['scenario']} {r['controller']}: the machine acted, but never through this configuration's own "
+             f"law (`law_share` 0) — the run is driven by the hazard law (12)." for r in records
+             if r.get("law_share") == 0.0]
     return notes + [""] if notes else []
 
 
