@@ -214,8 +214,11 @@ def run(args) -> int:
 
 
 def _json(name: str, log_dir: Path) -> list[str]:
-    """The options that have child `name` write its exit summary as JSON in the log directory."""
-    return ["--json", str(log_dir / f"{name}.json")]
+    """The options that have child `name` write its exit summary as JSON in the log directory. A summary
+    left there by an earlier run is removed first: a child that dies without writing one has none."""
+    path = log_dir / f"{name}.json"
+    path.unlink(missing_ok=True)
+    return ["--json", str(path)]
 
 
 def _process_report(child: Child, log_dir: Path) -> dict:

@@ -57,3 +57,14 @@ def test_a_summary_written_to_a_named_pipe_goes_through_it_and_leaves_the_pipe_a
     assert received and json.loads(received[0]) == {"ticks": 3}
     assert stat.S_ISFIFO(os.stat(pipe).st_mode)
     assert [p.name for p in tmp_path.iterdir()] == ["summary.fifo"]
+
+
+def test_a_summary_gets_the_mode_a_plainly_created_file_would(tmp_path):
+    """Readable as `open(path, "w")` would leave it under the process's umask (not the temporary file's 0600)."""
+    import os
+    import stat
+
+    plain = tmp_path / "plain.json"
+    plain.write_text("{}")
+    write_json(tmp_path / "summary.json", {"ticks": 1})
+    assert stat.S_IMODE(os.stat(tmp_path / "summary.json").st_mode) == stat.S_IMODE(os.stat(plain).st_mode)
