@@ -118,14 +118,18 @@ class SharedController:
                             feasible.group_rows(decision.group, rows))
         previous_law = machine.law(law_role) if law_role is not None else None
         incoming = machine.law(decision.role)
-        if engaged and (previous_law is None or decision.group_changed or incoming is not previous_law):
+        # outside the active group (possible only sampled, with delay) no law has a value: the recovery force
+        # acts, and the law is disengaged, so the first sample back inside restarts its filters from their
+        # published initial conditions instead of resuming them where they stood still
+        lawful = engaged and c.inside
+        if lawful and (previous_law is None or decision.group_changed or incoming is not previous_law):
             if previous_law is not None:
                 theta_hat = previous_law.estimate(theta_hat, law_state)
             law_role = decision.role
             law_state = incoming.initial_state(model, grp, c, q, v_used, theta_hat)
-        elif engaged:
+        elif lawful:
             law_role = decision.role        # the same law in the other role: its filters carry on
-        elif not engaged and previous_law is not None:
+        elif previous_law is not None:
             theta_hat = previous_law.estimate(theta_hat, law_state)
             law_role, law_state = None, _EMPTY
 
@@ -134,7 +138,7 @@ class SharedController:
         theta_next, law_next = theta_hat, law_state
         out = None
         if engaged:
-            if c.inside:
+            if lawful:
                 law = machine.law(law_role)
                 out = law.evaluate(model, grp, c, q, v_used, theta_hat, law_state)
                 u_f = out.u

@@ -410,3 +410,27 @@ def test_the_composite_law_on_floats_is_its_formula(case):
     rate = law.with_applied_input(out.state_dot, u_s)
     want = np.concatenate([-law.alpha_n * p_n + p, (-law.alpha_n * W_n + W).ravel(), -law.alpha_n * u_n + u_s])
     np.testing.assert_allclose(rate, want, rtol=1e-12, atol=1e-12)
+
+
+
+def test_a_take_over_outside_the_remembered_group_recovers_and_restarts_the_filters_inside():
+    """Sampled with delay, the machine can take over while q is outside the group it remembers: no law has a
+    value there (z = ln(x/x_r) needs x < 0), so the recovery force acts — finite, pushing back across the face —
+    with the law disengaged, and the first sample back inside starts the NCE filters from (15)."""
+    loop, q0, _ = load("adversarial_wall").closed_loop("nce")
+    ctrl = SharedController(loop.model, loop.feasible, loop.controller, loop.sharing, loop.reference)
+    state, dt, n = ctrl.initial_state(q0), 0.002, loop.model.n
+    wish = Desired(np.array([0.0, 5.0, 0.0]), np.zeros(3), np.zeros(3))
+    push, rest = OperatorInput(wish, np.array([0.0, 60.0, 0.0]), 1.0), OperatorInput(wish, np.zeros(3), 0.0)
+    state, out = ctrl.step(state, np.array([0.0, 3.98, 0.0]), np.array([0.0, 1.0, 0.0]), push, dt)
+    assert out.authority is not Authority.HUMAN                       # the machine takes the face's group
+    for _ in range(200):                                              # safe, at rest: authority returns
+        state, out = ctrl.step(state, np.array([0.0, 3.5, 0.0]), np.zeros(3), rest, dt)
+    assert out.authority is Authority.HUMAN
+    state, out = ctrl.step(state, np.array([0.0, 4.01, 0.0]), np.array([0.0, 0.5, 0.0]), push, dt)
+    assert out.authority is not Authority.HUMAN and out.group is not None
+    assert np.all(np.isfinite(out.u_s)) and out.u_f[1] < 0.0          # recovery: pushed back across y = 4
+    assert state.law_role is None                                     # no law state outside
+    state, out = ctrl.step(state, np.array([0.0, 3.97, 0.0]), np.array([0.0, -0.2, 0.0]), push, dt)
+    assert state.law_role is not None and np.all(np.isfinite(state.law_state))
+    assert np.allclose(state.law_state[-n:], dt * out.u_s)            # u_n from u_n(0) = 0: u̇_n = −α_n u_n + u_s
