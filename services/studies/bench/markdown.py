@@ -29,7 +29,7 @@ def lookup(report: dict, dotted: str):
 def render(report: dict) -> str:
     m = report.get("machine", {})
     out = [
-        f"# sharedctl bench{' --quick' if report.get('quick') else ''} — {report.get('started', '?')}",
+        f"# sharedctl bench{' --quick' if report.get('quick') else ''}",   # the start time stays in the JSON
         "",
         f"Machine: {m.get('cpu')}, {m.get('cores')} cores, kernel {m.get('kernel')}, Python {m.get('python')}, "
         f"numpy {m.get('numpy')}; load average (1, 5, 15 min) before {m.get('loadavg_before')}, "

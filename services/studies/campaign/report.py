@@ -74,7 +74,8 @@ def write_report(result: dict, out_dir: Path, title: str = "Fault campaign") -> 
 def markdown(result: dict, plots: list[str], title: str = "Fault campaign") -> str:
     rows = result["rows"]
     lines = [f"# {title}", ""]
-    meta = [f"{k}: {result[k]}" for k in ("command", "started", "host", "load_before", "load_after") if k in result]
+    # the run's start time stays in the JSON: the report is reference, not a diary
+    meta = [f"{k}: {result[k]}" for k in ("command", "host", "load_before", "load_after") if k in result]
     if meta:
         lines += ["```", *meta, "```", ""]
     verdict = ("**0 ground-truth violations.**" if result["violating_runs"] == 0 else
