@@ -60,13 +60,15 @@ def p_of(group, c, v, lam):
 
 
 # ----- the printed law (13)–(15) -------------------------------------------------------------------
+def _printed_law_on_the_wall():
+    """The robot, the wall's group, the printed law (13), the reference shape and a slow line wish."""
+    group = FeasibleSet.from_regions([Polytope.from_rows(WALL_K, WALL_T)]).groups[0]
+    return OmniRobot(), group, NonCertaintyEquivalentLaw(), ReferenceShape(), line([-0.4, 2.5, 0.0], [0.05, 0.1, 0.05])
+
+
 def test_printed_law_identities_hold_when_the_input_is_exactly_13():
     """M(ṗ_n + k_q p_n) = W_n θ + u_n and u_n = −W_n(θ̂ + β), with u̇_n = −α_n u_n + u_f (17)."""
-    model = OmniRobot()
-    group = FeasibleSet.from_regions([Polytope.from_rows(WALL_K, WALL_T)]).groups[0]
-    law = NonCertaintyEquivalentLaw()
-    shape = ReferenceShape()
-    wish = line([-0.4, 2.5, 0.0], [0.05, 0.1, 0.05])
+    model, group, law, shape, wish = _printed_law_on_the_wall()
     n, k = model.n, model.n_theta
     q, v = np.array([-0.6, 2.0, 0.1]), np.array([0.2, -0.1, 0.0])
     c = coordinates(group, q, v, wish.sample(0.0), shape)
@@ -103,11 +105,7 @@ def test_printed_law_identities_hold_when_the_input_is_exactly_13():
 def _printed_run_with_barrier(steps=4000, dt=5e-4):
     """(13) plus u_b = −Kᵀ Z1 z on the omnidirectional robot moving into the face y = 4, integrated here by
     RK4 with the filter u̇_{b,n} = −α_n u_{b,n} + u_b; returns the samples [q, q̇, θ̂, p_n, W_n, u_{b,n}]."""
-    model = OmniRobot()
-    group = FeasibleSet.from_regions([Polytope.from_rows(WALL_K, WALL_T)]).groups[0]
-    law = NonCertaintyEquivalentLaw()
-    shape = ReferenceShape()
-    wish = line([-0.4, 2.5, 0.0], [0.05, 0.1, 0.05])
+    model, group, law, shape, wish = _printed_law_on_the_wall()
     n, k = model.n, model.n_theta
     q, v = np.array([-0.6, 3.7, 0.1]), np.array([0.2, 0.8, 0.0])        # 0.3 m from y = 4, moving into it
     c = coordinates(group, q, v, wish.sample(0.0), shape)

@@ -47,8 +47,7 @@ class CertaintyEquivalentLaw(MachineLaw):
         p, _, v_ref, a_ref = reference_signals(cf, f.K, f.K_inv, v, self.lam)
         Y = model.regressor_rows(floats(q), v, v_ref, a_ref)
         kp, theta = cached_gain_floats(self, "Kp", model.n), floats(theta_hat)
-        barrier = matvec(f.K_transposed, [zj / xj for zj, xj in zip(cf.z, cf.x)])     # Kᵀ Z1 z
-        u = [-kj * pj - bj + dot(row, theta) for kj, pj, bj, row in zip(kp, p, barrier, Y)]
+        u = barrier_force(f, cf, kp, p, Y, theta)
         theta_dot = [-dot(column, p) / self.gamma_theta for column in zip(*Y)]         # −Yᵀ p / γ_θ
         return LawOutput(np.array(u), np.array(theta_dot), _NO_STATE)
 
@@ -63,6 +62,12 @@ class CertaintyEquivalentLaw(MachineLaw):
         p, *_ = self.error_signals(model, group, c, q, v)
         kp = diag_gain(self.Kp, model.n)
         return float((self.lam + 1.0) * np.sum(c.z**2 / c.x) - p @ (kp * p))
+
+
+def barrier_force(f, cf, kp, p, Y, theta) -> list:
+    """u_f of (12) on floats: −K_p p − Kᵀ Z1 z + Y θ̂ (f: the group's float rows, cf: its coordinates)."""
+    barrier = matvec(f.K_transposed, [zj / xj for zj, xj in zip(cf.z, cf.x)])         # Kᵀ Z1 z
+    return [-kj * pj - bj + dot(row, theta) for kj, pj, bj, row in zip(kp, p, barrier, Y)]
 
 
 _NO_STATE = np.zeros(0)

@@ -33,9 +33,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..short_vectors import dot, floats, matvec
+from ..short_vectors import dot, floats
 from ..transform import reference_signals
 from .base import LawOutput, MachineLaw, cached_gain_floats
+from .certainty_equivalent import barrier_force
 from .non_certainty_equivalent import filtered_regressor_rows
 
 
@@ -80,8 +81,7 @@ class CompositeAdaptiveLaw(MachineLaw):
         q, theta = floats(q), floats(theta_hat)
         Y = model.regressor_rows(q, v, v_ref, a_ref)
         kp, kq, alpha = cached_gain_floats(self, "Kp", n), self.k_q, self.alpha_n
-        barrier = matvec(f.K_transposed, [zj / xj for zj, xj in zip(cf.z, cf.x)])     # Kᵀ Z1 z
-        u = [-kj * pj - bj + dot(row, theta) for kj, pj, bj, row in zip(kp, p, barrier, Y)]
+        u = barrier_force(f, cf, kp, p, Y, theta)                                       # (12)
         s = [pj + (kq - alpha) * pnj for pj, pnj in zip(p, p_n)]
         W = filtered_regressor_rows(model, q, v, p, s, Y, kq)
         Phi = [[m - w for m, w in zip(mr, wr)] for mr, wr in zip(model.mass_regressor_rows(q, s), W_n)]
