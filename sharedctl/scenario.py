@@ -11,7 +11,8 @@ Keys (all SI; see docs/scenarios.md):
   [sharing]  mode = "shared" | "machine" | "human", b1, b2, b0, blend_time_constant, min_machine_dwell
   [reference] epsilon, gamma
   [gains.ce] Kp, lam, gamma_theta   [gains.nce] (over [gains.ce]) Kp, lam, gamma_theta, k_q, alpha_n, gamma_n, nu
-  [gains.of] K1, k2, gamma_theta, sign_width   [gains.observer] Ka, Kb, sign_width
+  [gains.of] K1, k2, gamma_theta, sign_width   [gains.of_barrier] Kp, lam, gamma_theta, barrier_weight
+  [gains.observer] Ka, Kb, sign_width
   theta_hat0 = [...]  (default zeros, as in the paper)
 """
 from __future__ import annotations
@@ -161,7 +162,7 @@ def build(data: dict, controller: str | None):
     sharing = data.get("sharing", {})
     try:
         bands = Bands(_number(sharing, "b1", 0.3, "sharing."), _number(sharing, "b2", 0.6, "sharing."),
-                      _number(sharing, "b0", 0.025, "sharing."))
+                      _number(sharing, "b0", 0.025, "sharing."), _number(sharing, "standoff", 0.15, "sharing."))
         mode = Mode(sharing.get("mode", "shared"))
         ref = data.get("reference", {})
         shape = ReferenceShape(_number(ref, "epsilon", 0.05, "reference."), _number(ref, "gamma", 40.0, "reference."))
@@ -170,6 +171,9 @@ def build(data: dict, controller: str | None):
     if bands.b0 >= shape.epsilon:
         raise ScenarioError("sharing.b0 must be smaller than reference.epsilon "
                             "(the projection must lie outside the inner band)")
+    if 0.0 < bands.standoff <= shape.epsilon:
+        raise ScenarioError("sharing.standoff must be larger than reference.epsilon, or 0 "
+                            "(the machine's rest point, ε inside a face, must lie in the standoff band)")
     dwell = sharing.get("min_machine_dwell", 0.25)
     if isinstance(dwell, bool) or not isinstance(dwell, (int, float)) or not (0 <= dwell < 1e3):
         raise ScenarioError("sharing.min_machine_dwell must be a number of seconds >= 0")

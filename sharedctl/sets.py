@@ -17,7 +17,16 @@ at speed s is first hazardous only s·b1²/(1 + s·b1) from the face — 0.27 mm
 whose forces grow like 1/x there (every law of the paper) then acts at a distance no sampled
 or numerically integrated loop can follow. Any approach within b0 of a face is therefore
 hazardous too, so the machine takes over at least b0 from it. b0 < ε keeps the projected
-reference (at −ε) outside the inner band. b0 = 0 gives Definition 2 as printed.
+reference (at −ε) outside the inner band.
+
+The standoff band b_s (an addition): a row less than b_s from its face is never safe — at rest it is
+in the hysteresis set. Definition 2's curves are allowances on speed only, so a state at rest is
+safe however close to a face; the machine, holding off an operator who pushes out of the set, brings
+the robot to rest at its projected reference ε inside the face, and with the printed sets that rest
+state is safe, (46) hands authority back, the push brings the robot in again and the hand-over
+oscillates. b_s > ε puts the machine's rest point in the hysteresis set, where k_s keeps its value
+(sharing.py releases it when the operator's wish returns inside). b0 = b_s = 0 give Definition 2 as
+printed.
 
 For a union of polytopes (non-convex Q_a) the state is SAFE if it is safe with respect to
 some polytope that contains q (the robot can stay in that one), HAZARD if it is hazardous
@@ -47,17 +56,21 @@ class SetClass(enum.IntEnum):
 @dataclass(frozen=True)
 class Bands:
     """b1 < b2: the widths (in constraint units, metres for unit rows) of the two bands;
-    b0 < b1: the inner band in which any approach is hazardous (0 = Definition 2 as printed)."""
+    b0 < b1: the inner band in which any approach is hazardous; b0 ≤ b_s < b1: the standoff band, in
+    which no state is safe (0, 0 = Definition 2 as printed)."""
 
     b1: float = 0.3
     b2: float = 0.6
     b0: float = 0.025
+    standoff: float = 0.15
 
     def __post_init__(self):
         if not (0.0 < self.b1 < self.b2):
             raise ValueError(f"need 0 < b1 < b2, got b1={self.b1}, b2={self.b2}")
         if not (0.0 <= self.b0 < self.b1):
             raise ValueError(f"need 0 <= b0 < b1, got b0={self.b0}")
+        if not (self.b0 <= self.standoff < self.b1):
+            raise ValueError(f"need b0 <= standoff < b1, got standoff={self.standoff}")
 
 
 def allowance(x: np.ndarray, b: float) -> np.ndarray:
@@ -76,8 +89,9 @@ def hazardous_rows(x: np.ndarray, x_dot: np.ndarray, bands: Bands) -> np.ndarray
 
 
 def unsafe_rows(x: np.ndarray, x_dot: np.ndarray, bands: Bands) -> np.ndarray:
-    """Boolean per row: x ≥ −b2 and ẋ > f_b2(x) (rows at or past the face count as unsafe)."""
-    return (x >= -bands.b2) & (x_dot > allowance(x, bands.b2))
+    """Boolean per row: x ≥ −b2 and ẋ > f_b2(x), or x > −b_s (the standoff band); rows at or past the
+    face count as unsafe."""
+    return ((x >= -bands.b2) & (x_dot > allowance(x, bands.b2))) | (x > -bands.standoff)
 
 
 def classify_rows(x: np.ndarray, x_dot: np.ndarray, bands: Bands) -> SetClass:
@@ -98,12 +112,12 @@ class Situation(NamedTuple):
     hazard_rows: dict[int, tuple[int, ...]]  # hazardous row indices per containing region
 
 
-def _row_flags(x: float, x_dot: float, b0: float, b1: float, b2: float) -> tuple[bool, bool]:
+def _row_flags(x: float, x_dot: float, b0: float, b1: float, b2: float, bs: float) -> tuple[bool, bool]:
     """(hazardous, unsafe) for one row: hazardous_rows and unsafe_rows on Python floats (same arithmetic)."""
     hazardous = x < 0.0 and x >= -b1 and (
         x_dot >= (1.0 / (x + b1) - 1.0 / b1 if x > -b1 else math.inf) or (x >= -b0 and x_dot > 0.0)
     )
-    unsafe = x > -b2 and x_dot > 1.0 / (x + b2) - 1.0 / b2      # at x ≤ −b2 the allowance is +∞
+    unsafe = x > -bs or x > -b2 and x_dot > 1.0 / (x + b2) - 1.0 / b2      # at x ≤ −b2 the allowance is +∞
     return hazardous, unsafe
 
 
@@ -113,13 +127,13 @@ def classify_groups(feasible: FeasibleSet, q, v, bands: Bands, rows=None) -> tup
 
     Row by row on Python floats (_row_flags, as in classify). `rows` may hold
     `feasible.row_values(q, v)` already computed by the caller."""
-    b0, b1, b2 = bands.b0, bands.b1, bands.b2
+    b0, b1, b2, bs = bands.b0, bands.b1, bands.b2, bands.standoff
     rows = feasible.row_values(q, v) if rows is None else rows
     classes = []
     for g in range(len(feasible.groups)):
         group_class = SetClass.SAFE
         for xj, dj in zip(*feasible.group_rows(g, rows)):
-            hazardous, unsafe = _row_flags(xj, dj, b0, b1, b2)
+            hazardous, unsafe = _row_flags(xj, dj, b0, b1, b2, bs)
             if hazardous:
                 group_class = SetClass.HAZARD
                 break
@@ -138,7 +152,7 @@ def classify(feasible: FeasibleSet, q: np.ndarray, v: np.ndarray, bands: Bands, 
     region_class: dict[int, SetClass] = {}
     hazard: dict[int, tuple[int, ...]] = {}
     containing = []
-    b0, b1, b2 = bands.b0, bands.b1, bands.b2
+    b0, b1, b2, bs = bands.b0, bands.b1, bands.b2, bands.standoff
     values, rates = feasible.row_values(q, v) if rows is None else rows
     for index, (first, end) in enumerate(feasible.row_spans):
         x = values[first:end]
@@ -147,7 +161,7 @@ def classify(feasible: FeasibleSet, q: np.ndarray, v: np.ndarray, bands: Bands, 
         containing.append(index)
         rows, any_unsafe = [], False
         for j, (xj, dj) in enumerate(zip(x, rates[first:end])):
-            hazardous, unsafe = _row_flags(xj, dj, b0, b1, b2)
+            hazardous, unsafe = _row_flags(xj, dj, b0, b1, b2, bs)
             if hazardous:
                 rows.append(j)
             any_unsafe = any_unsafe or unsafe

@@ -21,7 +21,17 @@ from .constraints import FeasibleSet
 from .models import EulerLagrangeModel
 from .reference import ReferenceShape
 from .sets import SetClass
-from .sharing import ArbiterState, Authority, LawRole, Mode, SharingParameters, arbitrate, select_group, shared_input
+from .sharing import (
+    ArbiterState,
+    Authority,
+    LawRole,
+    Mode,
+    SharingParameters,
+    arbitrate,
+    select_group,
+    shared_input,
+    push_turned_away,
+)
 from .short_vectors import all_finite, floats
 from .simulator import MachineController
 from .transform import Desired, all_groups, coordinates
@@ -108,7 +118,9 @@ class SharedController:
         every_group = _EveryGroupOnDemand(feasible, np.array(q_list), np.array(v_list), operator.desired,
                                           self.reference, machine.tracking.lam)
         arbiter, decision = arbitrate(feasible, self.sharing, state.arbiter, q, v_used, intent, dt,
-                                      every_group.lyapunov, every_group, rows)
+                                      every_group.lyapunov, every_group, rows,
+                                      push_turned_away(feasible, q_list, operator.desired.q, operator.force,
+                                                       self.reference.epsilon, self.sharing.bands))
 
         theta_hat, law_role, law_state = state.theta_hat, state.law_role, state.law_state
         engaged = decision.authority is not Authority.HUMAN and decision.group is not None

@@ -1,30 +1,29 @@
 """Authority sharing between the operator and the machine (paper (46)–(47)).
 
 The paper's sharing function k_s^i is a Schmitt trigger on the sets of Definition 2:
-0 (machine) in the hazardous set for the group of least Lyapunov value, its last value in
-the hysteresis set, 1 (human) otherwise. The printed blend lost its signs (see
-docs/control.md §6); the reading implemented here keeps the two properties the product
-must have:
+0 (machine) in the hazardous set, its last value in the hysteresis set, 1 (human) in the safe
+set. The printed blend lost its signs and, read literally, neither gives transparency nor a
+smooth hand-over (docs/control.md §6). The reading implemented here:
 
-* **transparency** — in the safe set u_s = u_h exactly (k_s = 1);
-* **full machine authority** in the hazardous set — u_s = u_f (k_s = 0, k_f = 1).
+* **transparency** — in the safe set, after the minimum dwell, u_s = u_h exactly (k_s = 1);
+* **full machine authority** in the hazardous set — u_s = u_f (k_s = 0, k_f = 1);
+* **release when the push turns away** — the machine hands authority back as soon as the state is
+  safe, *or* the state is not hazardous and the operator's push has turned away (the wish q_d is
+  inside Q_a by at least ε and the force u_h pushes towards no face the robot is within b_s of),
+  after the minimum dwell Δt in both cases. While the push lasts, the machine keeps authority and,
+  running its law on the projected reference,
+  brings the robot to rest ε inside the face — in the standoff band of sets.py, which is not
+  safe — so an operator pushing out of the set meets one take-over and one release, not a
+  pulse train;
+* **the blend** — where k_s = 0 outside the hazardous set, u_s = k_h u_h + k_f u_f, k_f = 1 − k_h,
+  with k_h relaxing (time constant τ) towards 1 once the push has turned away and towards 0 while
+  it has not, and k_h = 0 in the hazardous set. k_h is continuous along every trajectory that
+  stays latched, so u_s has no jump there; authority is MACHINE whenever k_h = 0 (u_s = u_f).
 
 Minimum dwell. Near a face both allowance curves of Definition 2 go to zero, so the
 hysteresis band between them is thin: the machine's first push reverses the approach and
-puts the state straight back in the safe set. Read literally, (46) then hands authority
-back at once and, with an operator pushing into the face, switches at the sample rate
-(Zeno in continuous time; tests/test_sharing_properties.py keeps the measurement). The
-machine therefore keeps authority for at least Δt = min_machine_dwell after taking over
-(Theorem 5 assumes such a Δt > 0). Transparency holds whenever k_s = 1, and k_s = 1 in
-the safe set except within Δt of an intervention.
-
-In the hysteresis set, k_s holds its last value. When it holds 1, the operator keeps full
-authority. When it holds 0 (the machine took over and the state has not yet reached the
-safe set), the intent measure (45) blends: u_s = k_h u_h + k_f u_f with k_f = 1 − k_h and
-k_h relaxing with time constant τ towards 1 − e^{−v_h}: an operator who pushes hard
-gets authority back progressively, one who lets go leaves the machine in charge, and the
-force has no jump when the state leaves the hazardous set. k_h is reset to 0 whenever the
-state is hazardous.
+puts the state straight back in the safe set. The machine therefore keeps authority for at
+least Δt = min_machine_dwell after taking over (Theorem 5 assumes such a Δt > 0).
 
 Group selection: on taking over, the machine picks, among the groups of the polytopes
 that contain q, the one of least Lyapunov value that contains every hazardous row of its
@@ -46,8 +45,8 @@ from .sets import Bands, SetClass, Situation, classify
 
 class Authority(enum.IntEnum):
     HUMAN = 0     # k_s = 1: u_s = u_h
-    SHARED = 1    # k_s = 0 held in the hysteresis set: u_s = k_h u_h + k_f u_f
-    MACHINE = 2   # k_s = 0 in the hazardous set (or machine-only mode): u_s = u_f
+    SHARED = 1    # k_s = 0 outside the hazardous set, 0 < k_h: u_s = k_h u_h + k_f u_f
+    MACHINE = 2   # k_s = 0 and k_h = 0 (always in the hazardous set, or machine-only mode): u_s = u_f
 
 
 class Mode(enum.Enum):
@@ -58,7 +57,7 @@ class Mode(enum.Enum):
 
 class LawRole(enum.IntEnum):
     TRACKING = 0   # the configured law (ce: (12); nce: (12) with the composite update; of: (25))
-    HAZARD = 1     # the law that runs in the hazardous set (the configured one, except (12) on v̂ for of)
+    HAZARD = 1     # the law that runs in the hazardous set (the configured one; of: its barrier form, §4.3)
 
 
 @dataclass(frozen=True)
@@ -153,13 +152,15 @@ def arbitrate(
     lyapunov,
     reference: np.ndarray | None = None,
     rows: tuple[list, list] | None = None,
+    push_away: bool = False,
 ) -> tuple[ArbiterState, Decision]:
     """One sample of the sharing function: classify, latch, select, blend.
 
     `v` is the measured velocity (state feedback, (46)) or the observer's v̂ (output
     feedback, (47)). `intent` is v_h of (45). `lyapunov(g)` is evaluated lazily; `reference`
     holds every group's projected reference (see select_group). `rows`: the caller's
-    `feasible.row_values(q, v)`, if it has them already.
+    `feasible.row_values(q, v)`, if it has them already. `push_away`: has the operator's push turned
+    away from the faces (push_turned_away)? False (unknown) releases in the safe set only.
     """
     situation = classify(feasible, q, v, params.bands, rows)
     overall = situation.overall
@@ -177,7 +178,8 @@ def arbitrate(
         if not latched:
             machine_time = 0.0
         latched = True
-    elif overall is SetClass.SAFE and machine_time >= params.min_machine_dwell:
+    elif (overall is not SetClass.HAZARD and machine_time >= params.min_machine_dwell
+          and (overall is SetClass.SAFE or push_away)):
         latched = False
     switches = state.switches + (latched != state.machine_latched and mode is Mode.SHARED)
 
@@ -217,11 +219,11 @@ def arbitrate(
     elif mode is Mode.MACHINE or overall is SetClass.HAZARD:
         authority, k_h = Authority.MACHINE, 0.0
     else:
-        # hysteresis set, or safe set within the minimum dwell: only reachable from the
-        # hazardous set, where k_h was reset to 0
-        target = 1.0 - math.exp(-max(intent, 0.0))
+        # latched outside the hazardous set: k_h relaxes towards 1 once the push has turned away, towards
+        # 0 (where it stays exactly, from the hazardous set's 0) while it has not
+        target = 1.0 if push_away else 0.0
         k_h = state.k_h + (target - state.k_h) * (1.0 - math.exp(-dt / params.blend_time_constant))
-        authority = Authority.SHARED
+        authority = Authority.MACHINE if k_h == 0.0 else Authority.SHARED
     k_f = 1.0 - k_h
 
     new_state = ArbiterState(      # every field (as dataclasses.replace would, without its overhead)
@@ -235,6 +237,31 @@ def arbitrate(
     )
     decision = Decision(authority, group, role, k_h, k_f, situation, group_changed, role != state.role)
     return new_state, decision
+
+
+def wish_admissible(feasible: FeasibleSet, q_d, epsilon: float) -> bool:
+    """Is the operator's wish q_d inside Q_a by at least ε (inside some polytope, every row ≤ −ε)?
+    Where it is, the projection (7) leaves it (nearly) unchanged: the operator asks for nothing the
+    machine would refuse."""
+    return feasible.margin(np.asarray(q_d, dtype=float)) >= epsilon
+
+
+def push_turned_away(feasible: FeasibleSet, q, q_d, u_h, epsilon: float, bands: Bands) -> bool:
+    """Has the operator's push turned away from the faces? The wish is admissible (wish_admissible) and,
+    in some polytope that contains q, u_h has no component towards a face the robot is within the
+    standoff band of (k_j u_h ≤ 0 for every row with −b_s < k_j q + t_j < 0): both the wish and the
+    hand say "back in". (As for the sets, a union asks for one polytope: pushing at a face of one
+    polytope that lies inside another is not pushing out of Q_a.)"""
+    if not wish_admissible(feasible, q_d, epsilon):
+        return False
+    standoff = bands.standoff
+    values, pushes = feasible.row_values(q, u_h)
+    for first, end in feasible.row_spans:
+        x = values[first:end]
+        if all(xj < 0.0 for xj in x) and not any(
+                -standoff < xj and push > 0.0 for xj, push in zip(x, pushes[first:end])):
+            return True
+    return False
 
 
 def shared_input(decision: Decision, u_h: np.ndarray, u_f: np.ndarray) -> np.ndarray:

@@ -25,6 +25,7 @@ from .controllers import (
     CertaintyEquivalentLaw,
     CompositeAdaptiveLaw,
     MachineLaw,
+    OutputFeedbackBarrierLaw,
     OutputFeedbackLaw,
     VelocityObserver,
 )
@@ -32,7 +33,18 @@ from .human import HumanModel
 from .models import EulerLagrangeModel
 from .reference import ReferenceShape
 from .sets import classify
-from .sharing import ArbiterState, Authority, LawRole, Mode, SharingParameters, arbitrate, select_group, shared_input
+from .sharing import (
+    ArbiterState,
+    Authority,
+    LawRole,
+    Mode,
+    SharingParameters,
+    arbitrate,
+    select_group,
+    shared_input,
+    push_turned_away,
+    wish_admissible,
+)
 from .transform import all_groups, coordinates
 
 
@@ -49,18 +61,29 @@ class MachineController:
     def name(self) -> str:
         return self.tracking.name
 
+    @property
+    def kind(self) -> str:
+        """The configuration ("ce", "nce", "of"): the tracking law's. A law of another
+        configuration in either role (a fallback) is not the configuration's own."""
+        return self.tracking.configuration
+
+    def owns(self, law: MachineLaw | None) -> bool:
+        """Whether `law` belongs to this configuration (the `own_law` of a trace)."""
+        return law is not None and law.configuration == self.kind
+
     def law(self, role: LawRole) -> MachineLaw:
         return self.hazard if role is LawRole.HAZARD else self.tracking
 
 
 def make_controller(kind: str, gains: dict | None = None, model: EulerLagrangeModel | None = None) -> MachineController:
     """`ce` → (12) everywhere; `nce` → the composite law (12) + prediction error on (14)–(15)'s
-    filters everywhere (docs/control.md §4.2); `of` → (25) with the observer (40), and (12) on the
-    observer's v̂ in the hazardous set (docs/control.md §4.3).
+    filters everywhere (docs/control.md §4.2); `of` → (25) with the observer (40), and the
+    bounded-gain barrier law on the observer's v̂ in the hazardous set (docs/control.md §4.3).
 
-    `gains` maps a law ("ce", "nce", "of", "observer") to keyword overrides; they are laid
-    over the model's `default_gains` (gains scale with the plant's inertia). The composite law's
-    (12) part (K_p, λ_q, γ_θ) takes the "ce" table, and the "nce" table over it.
+    `gains` maps a law ("ce", "nce", "of", "of_barrier", "observer") to keyword overrides; they are
+    laid over the model's `default_gains` (gains scale with the plant's inertia). The composite law's
+    (12) part (K_p, λ_q, γ_θ) takes the "ce" table, and the "nce" table over it; the OF barrier
+    law takes the "of_barrier" table (K_p, λ, γ_θ, barrier_weight).
     """
     merged = {k: dict(v) for k, v in getattr(model, "default_gains", {}).items()}
     for law, table in (gains or {}).items():
@@ -74,7 +97,8 @@ def make_controller(kind: str, gains: dict | None = None, model: EulerLagrangeMo
         return MachineController(nce, nce)
     if kind == "of":
         of = OutputFeedbackLaw(**gains.get("of", {}))
-        return MachineController(of, ce, VelocityObserver(**gains.get("observer", {})))
+        barrier = OutputFeedbackBarrierLaw(**gains.get("of_barrier", {}))
+        return MachineController(of, barrier, VelocityObserver(**gains.get("observer", {})))
     raise ValueError(f"unknown controller {kind!r} (expected ce, nce or of)")
 
 
@@ -120,13 +144,15 @@ class Trace:
     group_switches: int
     # None where the producer of the trace does not know them:
     true_class: np.ndarray | None = None   # SetClass of the true (q, q̇) (Definition 2), −1 where no input was recorded
-    own_law: np.ndarray | None = None      # u_f came from the configuration's own law (MachineController.tracking)
+    own_law: np.ndarray | None = None      # u_f came from a law of the configuration (MachineController.owns)
+    wish_inside: np.ndarray | None = None  # the operator's wish was admissible (sharing.wish_admissible)
     theta: np.ndarray | None = None        # the plant's true θ
 
 
 class _Recorder:
     def __init__(self, steps, n, n_theta, optional=()):
-        """`optional`: which of true_class, own_law the caller records (the others stay None in the Trace)."""
+        """`optional`: which of true_class, own_law, wish_inside the caller records (the others stay None
+        in the Trace)."""
         def z(*shape):
             return np.full((steps,) + shape, np.nan)
 
@@ -139,8 +165,9 @@ class _Recorder:
         self.cols["inside"] = np.zeros(steps, dtype=bool)
         if "true_class" in optional:
             self.cols["true_class"] = np.full(steps, -1, dtype=int)
-        if "own_law" in optional:
-            self.cols["own_law"] = np.zeros(steps, dtype=bool)
+        for name in ("own_law", "wish_inside"):
+            if name in optional:
+                self.cols[name] = np.zeros(steps, dtype=bool)
 
     def put(self, k, **values):
         for name, value in values.items():
@@ -166,7 +193,7 @@ def simulate(loop: ClosedLoop, q0, v0, duration: float, dt: float) -> Trace:
     law: MachineLaw | None = None
     law_state = np.zeros(0)
     engaged_before = False
-    rec = _Recorder(steps, n, n_theta, optional=("true_class", "own_law"))
+    rec = _Recorder(steps, n, n_theta, optional=("true_class", "own_law", "wish_inside"))
     finite = True
     is_omni = hasattr(model, "wheel_torques")
 
@@ -213,11 +240,15 @@ def simulate(loop: ClosedLoop, q0, v0, duration: float, dt: float) -> Trace:
         t = k * dt
         desired = human.desired(t)
         v_meas = velocity_for_control(q, v, obs)
-        intent = 0.0 if loop.sharing.mode is Mode.MACHINE else human.command_from(t, desired, q, v).intent
+        command = human.command_from(t, desired, q, v)
+        intent = 0.0 if loop.sharing.mode is Mode.MACHINE else command.intent
         q_r_all, values = all_groups(feasible.stack, q, v_meas, desired, loop.reference, ctrl.tracking.lam)
         ref_ok = feasible.reference_inside(q_r_all)
+        wish_inside = wish_admissible(feasible, desired.q, loop.reference.epsilon)
+        push_away = wish_inside and push_turned_away(feasible, q, desired.q, command.force, loop.reference.epsilon,
+                                                     loop.sharing.bands)
         arbiter, decision = arbitrate(feasible, loop.sharing, arbiter, q, v_meas, intent, dt,
-                                      values.__getitem__, ref_ok)
+                                      values.__getitem__, ref_ok, push_away=push_away)
         engaged = decision.authority is not Authority.HUMAN and decision.group is not None
         if engaged and (not engaged_before or decision.group_changed or ctrl.law(decision.role) is not law):
             if law is not None and law_state.size:
@@ -251,7 +282,7 @@ def simulate(loop: ClosedLoop, q0, v0, duration: float, dt: float) -> Trace:
             inside=feasible.contains(q),
             true_class=int(decision.situation.overall if observer is None
                            else classify(feasible, q, v, loop.sharing.bands).overall),
-            own_law=engaged and law is ctrl.tracking,
+            own_law=engaged and ctrl.owns(law), wish_inside=wish_inside,
         )
 
         state = (q, v, theta_hat, law_state, obs)

@@ -119,6 +119,27 @@ def reference_signals(c: CoordinateFloats, K, K_inv, v, lam: float):
     return [vj - rj for vj, rj in zip(v, v_ref)], zd, v_ref, a_ref
 
 
+def bounded_reference_signals(c: CoordinateFloats, K, K_inv, v, lam: float):
+    """(p, ż, v_ref, v̇_ref) of the output-feedback barrier law (docs/control.md §4.3) on floats, for
+    velocity v (floats): with μ(z) = −λ tanh z and e^z ∘ ẋ_r = x ∘ ẋ_r/x_r,
+
+        v_ref = K⁻¹[x ∘ (ẋ_r/x_r + μ(z))],   so Z1 K v_ref = ẋ_r/x_r + μ(z), ż = Z1 K p + μ(z),
+        v̇_ref = K⁻¹[ẋ ∘ (ẋ_r/x_r + μ + μ′) − x ∘ (ẋ_r/x_r)(ẋ_r/x_r + μ′) + e^z ∘ ẍ_r],
+
+    ẋ = K v, μ′(z) = −λ(1 − tanh² z), p = v − v_ref. The coefficient of ẋ in v̇_ref is bounded
+    (|μ + μ′| ≤ 5λ/4, |ẋ_r/x_r| ≤ |ẋ_r|/ε), where (12)'s grows like (1 + λ)/|x|."""
+    zd, lifted_v, lifted_a = [], [], []
+    for kv, xj, xr, xr_dot, xr_ddot, zj in zip(matvec(K, v), c.x, c.x_r, c.x_r_dot, c.x_r_ddot, c.z):
+        rate = xr_dot / xr
+        tz = math.tanh(zj)
+        mu, dmu = -lam * tz, -lam * (1.0 - tz * tz)
+        zd.append(kv / xj - rate)
+        lifted_v.append(xj * (rate + mu))
+        lifted_a.append(kv * (rate + mu + dmu) - xj * rate * (rate + dmu) + math.exp(zj) * xr_ddot)
+    v_ref, a_ref = matvec(K_inv, lifted_v), matvec(K_inv, lifted_a)
+    return [vj - rj for vj, rj in zip(v, v_ref)], zd, v_ref, a_ref
+
+
 def z_dot(c: GroupCoordinates, x_dot: np.ndarray) -> np.ndarray:
     """ż = ẋ/x − ẋ_r/x_r (equivalent to (9))."""
     return x_dot / c.x - c.x_r_dot / c.x_r

@@ -119,15 +119,17 @@ def paper_data(name: str) -> dict:
 # (convex) and t ≈ 8.9 s (non-convex): their first 8 s never leave the safe set. The
 # shortened variants keep every key of the file (set, q0, operator, gains) and only start
 # the file's desired line later, at its position at t = PAPER_SHIFT — the same line, entered
-# later — and run PAPER_DURATION = 5 s:
+# later — and run PAPER_DURATION (5 s convex, 10 s non-convex):
 # * convex, shift 9.5 s: first machine take-over at ≈ 1.4 s on the face x = −1, the slide
 #   along it and take-overs on y = 4 from ≈ 3 s, next to the corner x = −1, y = 4;
 # * non-convex, shift 16 s (the line start (0.7, 0.6) is inside the obstacle, so the operator
 #   pulls the robot from (−0.9, 3) straight at the face x = 0 at up to ≈ 1.8 m/s): take-over
-#   at ≈ 1.1 s, slide down the face, round the obstacle corner (0, 0) from {x ≤ 0} into
-#   {y ≤ 0} at ≈ 3.2–3.5 s (ce), then along y = 0.
+#   at ≈ 1.1 s, the machine slides the robot down the face with the projected wish while the
+#   wish is in the obstacle, hands it back once the wish is below y = −ε and the push has turned
+#   away (≈ 8 s: along the face the law follows the wish at its own pace), and the operator
+#   rounds the obstacle corner (0, 0) from {x ≤ 0} into {y ≤ 0}.
 PAPER_SHIFT = {"paper_convex": 9.5, "paper_nonconvex": 16.0}
-PAPER_DURATION = 5.0
+PAPER_DURATION = {"paper_convex": 5.0, "paper_nonconvex": 10.0}
 
 
 def paper_short_data(name: str) -> dict:
@@ -135,7 +137,7 @@ def paper_short_data(name: str) -> dict:
     t0 = PAPER_SHIFT[name]
     d = data["desired"]
     d["start"] = [s + v * t0 for s, v in zip(d["start"], d["velocity"])]
-    data["duration"] = PAPER_DURATION
+    data["duration"] = PAPER_DURATION[name]
     data["dt"] = DT
     data["name"] = f"{name}-shifted-{t0:g}s"
     return data

@@ -102,11 +102,14 @@ def test_printed_law_alone_keeps_the_group_feasible_in_continuous_time(speed):
 
 
 def test_printed_law_alone_sampled_at_500_hz_escapes_near_a_face():
-    """Why (12) on v̂ runs in the hazardous set: near a face the filtered-derivative terms of (25)
-    scale like k_o (k2+1)/x², and a 2 ms hold makes the loop unstable (docs/control.md §4.3)."""
+    """Why the barrier law on v̂ runs in the hazardous set: near a face the filtered-derivative terms
+    of (25) scale like k_o (k2+1)/x², and a 2 ms hold makes the loop unstable (docs/control.md §4.3);
+    the configuration, with OutputFeedbackBarrierLaw in the hazard role, stays inside, and that law
+    is what acts."""
+    from sharedctl.controllers import OutputFeedbackBarrierLaw
     from sharedctl.sampled import simulate_sampled
 
-    from sharedctl.sharing import Mode
+    from sharedctl.sharing import Authority, LawRole, Mode
     from sharedctl.simulator import make_controller
 
     # the paper's convex scenario: the operator creeps into the face x = −1 and the machine
@@ -117,5 +120,8 @@ def test_printed_law_alone_sampled_at_500_hz_escapes_near_a_face():
     trace = simulate_sampled(loop, np.array([-0.9, 3.0, 0.0]), np.zeros(3), 14.0, 0.002)
     assert not trace.inside.all()
     loop.controller = make_controller("of")
+    assert isinstance(loop.controller.hazard, OutputFeedbackBarrierLaw)
     trace = simulate_sampled(loop, np.array([-0.9, 3.0, 0.0]), np.zeros(3), 14.0, 0.002)
     assert trace.inside.all()
+    acting = (trace.authority != int(Authority.HUMAN)) & (trace.role == int(LawRole.HAZARD))
+    assert acting.any()

@@ -23,7 +23,8 @@ from sharedctl.services.scenario_files import load
 from sharedctl.sets import Bands, SetClass, classify, classify_groups, classify_rows
 
 SAFE, HYSTERESIS, HAZARD = SetClass.SAFE, SetClass.HYSTERESIS, SetClass.HAZARD
-DYADIC = Bands(b1=0.25, b2=0.5, b0=0.0625)    # f_b1(x) = 1/(x + 1/4) − 4, f_b2(x) = 1/(x + 1/2) − 2
+# f_b1(x) = 1/(x + 1/4) − 4, f_b2(x) = 1/(x + 1/2) − 2; the standoff band as wide as the inner band
+DYADIC = Bands(b1=0.25, b2=0.5, b0=0.0625, standoff=0.0625)
 HALF_LINE = FeasibleSet.from_regions([Polytope.from_rows([[1.0]], [0.0])])   # {x ≤ 0}: q = [x], one row, one group
 TINY = 2.0**-20
 BELOW_FOUR = math.nextafter(4.0, -math.inf)
@@ -45,7 +46,7 @@ ROWS = [
     (-0.0625, 0.0, SAFE),                # at rest on −b0: not an approach; 0 ≤ f_b2 = 0.286
     (-0.0625, -0.0, SAFE),
     (math.nextafter(-0.0625, -math.inf), TINY, SAFE),     # one float outside b0: 2⁻²⁰ < f_b2 ≈ 0.286
-    (0.0, 0.0, SAFE),                    # on the face, at rest: x < 0 fails, 0 > f_b2(0) = 2 − 2 = 0 fails
+    (0.0, 0.0, HYSTERESIS),              # on the face, at rest: not hazardous (x < 0 fails), in the standoff band
     (0.0, TINY, HYSTERESIS),             # on the face, moving out: ẋ > f_b2(0) = 0
 ]
 
@@ -83,16 +84,49 @@ def test_a_state_outside_every_polytope_is_hazardous(x):
 
 def test_the_printed_definition_leaves_an_inner_band_approach_safe():
     """b0 = 0 (Definition 2 as printed): x = −1/16, ẋ = 2⁻²⁰ is below f_b2(−1/16) = 0.286."""
-    printed = Bands(b1=0.25, b2=0.5, b0=0.0)
+    printed = Bands(b1=0.25, b2=0.5, b0=0.0, standoff=0.0)
     assert classify_rows(np.array([-0.0625]), np.array([TINY]), printed) is SAFE
 
 
-# ----- the paper's sets, default bands b0 = 0.025, b1 = 0.3, b2 = 0.6 ----------------------------
+def test_the_printed_definition_leaves_a_state_at_rest_on_the_face_safe():
+    """b0 = b_s = 0: x = 0, ẋ = 0 — 0 > f_b2(0) = 2 − 2 = 0 fails, so the row is not unsafe."""
+    printed = Bands(b1=0.25, b2=0.5, b0=0.0, standoff=0.0)
+    assert classify_rows(np.array([0.0]), np.array([0.0]), printed) is SAFE
+
+
+STANDOFF = Bands(b1=0.25, b2=0.5, b0=0.0625, standoff=0.1875)   # b_s = 3/16
+# (x, ẋ, class) with STANDOFF, by hand: inside the band (x > −3/16) nothing is safe
+STANDOFF_ROWS = [
+    (-0.125, 0.0, HYSTERESIS),            # at rest 1/8 from the face: in the band (printed: safe)
+    (-0.125, -5.0, HYSTERESIS),           # moving away, still in the band
+    (-0.125, 4.0, HAZARD),                # on f_b1(−1/8) = 4: hazardous, band or not
+    (-0.0625, TINY, HAZARD),              # the inner band's approach
+    (-0.1875, 0.0, SAFE),                 # on the band's edge: x > −b_s fails; 0 ≤ f_b2(−3/16) = 1.2
+    (math.nextafter(-0.1875, 0.0), 0.0, HYSTERESIS),   # one float inside the band
+    (-0.25, 0.0, SAFE),
+]
+
+
+@pytest.mark.parametrize("x,x_dot,expected", STANDOFF_ROWS, ids=[row_id(r) for r in STANDOFF_ROWS])
+def test_no_row_in_the_standoff_band_is_safe(x, x_dot, expected):
+    assert classify_rows(np.array([x]), np.array([x_dot]), STANDOFF) is expected
+    assert classify_groups(HALF_LINE, np.array([x]), np.array([x_dot]), STANDOFF) == (expected,)
+    assert classify(HALF_LINE, np.array([x]), np.array([x_dot]), STANDOFF).overall is expected
+
+
+def test_bands_refuse_a_standoff_band_outside_b0_to_b1():
+    with pytest.raises(ValueError, match="standoff"):
+        Bands(b1=0.3, b2=0.6, b0=0.025, standoff=0.02)
+    with pytest.raises(ValueError, match="standoff"):
+        Bands(b1=0.3, b2=0.6, b0=0.025, standoff=0.3)
+
+
+# ----- the paper's sets, bands b0 = 0.025, b1 = 0.3, b2 = 0.6, no standoff beyond b0 ---------------
 def paper_set(name):
     return load(name).closed_loop("ce")[0].feasible
 
 
-BANDS = Bands()
+BANDS = Bands(standoff=0.025)
 
 
 def test_convex_set_near_the_top_face_moving_up_is_hazardous_only_in_groups_holding_that_face():

@@ -19,7 +19,7 @@ import pytest
 
 from sharedctl.constraints import FeasibleSet, Polytope
 from sharedctl.human import LineTrajectory, ScriptedOperator
-from sharedctl.metrics import summarize
+from sharedctl.metrics import machine_authority_time, peak_norm, rms_norm, share_above, summarize
 from sharedctl.models import OmniRobot
 from sharedctl.models.omni_robot import OmniRobotParameters
 from sharedctl.scenario import parse
@@ -153,19 +153,35 @@ def test_the_certainty_equivalent_configuration_always_runs_its_own_law(name):
     assert summarize(trace, DT)["law_share"] == 1.0
 
 
-def test_output_feedback_falls_back_to_the_hazard_law_on_the_adversarial_wall():
-    """`of` runs (12) on v̂ in the hazard role (docs/control.md §6, item 6): on the adversarial wall the
-    machine acts only in that role, so (25) never produces u_f while the machine has authority. The
-    oracle is the law role of each machine sample (the hazard role runs another law than (25) today)."""
+def test_a_fallback_to_another_configurations_law_does_not_count_as_the_own_law():
+    """`of` with (12) put in its hazard role (a fallback: (12) is the `ce` configuration's law): on the
+    adversarial wall the machine acts only in the hazard role, so only the tracking-role samples count.
+    The oracle is the law role of each machine sample."""
+    from sharedctl.controllers import CertaintyEquivalentLaw
+    from sharedctl.simulator import MachineController
+
     scenario = packaged("adversarial_wall")
     loop, q0, v0 = scenario.closed_loop("of")
-    assert loop.controller.hazard is not loop.controller.tracking
+    machine_controller = loop.controller
+    loop.controller = MachineController(machine_controller.tracking, CertaintyEquivalentLaw(),
+                                        machine_controller.observer)
     trace = simulate(loop, q0, v0, scenario.duration, scenario.dt)
     machine = trace.authority != HUMAN
     tracking_role_share = float(np.mean(trace.role[machine] == int(LawRole.TRACKING)))
     law_share = summarize(trace, scenario.dt)["law_share"]
     assert law_share < 0.9
     assert law_share == pytest.approx(tracking_role_share, abs=1e-12)
+
+
+def test_output_feedback_counts_its_barrier_law_in_the_hazard_role_as_its_own():
+    """`of` runs its own barrier law on v̂ in the hazard role (docs/control.md §4.3): on the adversarial
+    wall, where the machine acts in that role, every machine sample counts."""
+    scenario = packaged("adversarial_wall")
+    loop, q0, v0 = scenario.closed_loop("of")
+    trace = simulate(loop, q0, v0, scenario.duration, scenario.dt)
+    machine = trace.authority != HUMAN
+    assert np.any(trace.role[machine] == int(LawRole.HAZARD))
+    assert summarize(trace, scenario.dt)["law_share"] == 1.0
 
 
 # ----- theta_error --------------------------------------------------------------------------------
@@ -186,3 +202,33 @@ def test_theta_error_is_the_relative_distance_to_the_robots_theta():
 def test_theta_error_is_none_where_theta_is_unknown():
     trace = hand_trace([HUMAN], [[0.0] * 3], [[0.0] * 3], theta_hat=[[1.0, 2.0, 3.0]], theta=None)
     assert summarize(trace, DT)["theta_error"] is None
+
+
+# ----- input and torque sizes, machine authority time ---------------------------------------------
+#: rows with norms 5 (3-4-0), 13 (5-12-0), 0, and a NaN row that every figure skips
+FORCES = [[3.0, -4.0, 0.0], [5.0, 0.0, 12.0], [0.0, 0.0, 0.0], [np.nan, 1.0, 0.0]]
+
+
+def test_peak_norm_is_the_largest_row_norm_skipping_nan_rows():
+    assert peak_norm(np.array(FORCES)) == 13.0
+
+
+def test_rms_norm_is_the_root_mean_square_of_the_row_norms_skipping_nan_rows():
+    assert rms_norm(np.array(FORCES)) == pytest.approx(np.sqrt((25.0 + 169.0 + 0.0) / 3), rel=1e-15)
+
+
+def test_share_above_counts_the_rows_with_some_component_over_the_limit():
+    # |components| > 4.5: row 1 (12 and 5) only; row 0's largest is 4; the NaN row is not a sample
+    assert share_above(np.array(FORCES), 4.5) == pytest.approx(1 / 3, abs=1e-15)
+    assert share_above(np.array(FORCES), 4.0) == pytest.approx(1 / 3, abs=1e-15)   # 4 is not above 4
+    assert share_above(np.array(FORCES), 3.9) == pytest.approx(2 / 3, abs=1e-15)
+
+
+def test_sizes_are_none_without_a_finite_sample():
+    empty = np.full((2, 3), np.nan)
+    assert (peak_norm(empty), rms_norm(empty), share_above(empty, 1.0)) == (None,) * 3
+
+
+def test_machine_authority_time_counts_only_full_machine_authority():
+    trace = hand_trace([HUMAN, MACHINE, SHARED, MACHINE, MACHINE, HUMAN], [[0.0] * 3] * 6, [[0.0] * 3] * 6)
+    assert machine_authority_time(trace, 0.002) == pytest.approx(3 * 0.002, abs=1e-15)

@@ -4,7 +4,8 @@
   q(t), the inputs, authority, θ̂(t) and the margin.
 * `paper_figures` — the set of Section 5 of Tang & Sun (2025): per scenario, the three
   controllers' paths in the shaded feasible set (Figures 1 and 5) and one "system response"
-  page per controller (Figures 2–4 and 6–8).
+  page per controller (Figures 2–4 and 6–8). Each run carries the description of the law it
+  ran (the paper command's laws.describe); titles, legends and captions print it as given.
 
 The feasible set is drawn in the plane of the first two coordinates (x–y for the omni robot,
 q1–q2 for the arm), sliced at the other coordinates = 0. Figures are built on
@@ -14,6 +15,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from typing import Iterator, Sequence
+
+import textwrap
 
 import matplotlib
 
@@ -27,12 +30,8 @@ from matplotlib.patches import Patch
 
 AUTHORITY = {0: ("human", "#1f77b4"), 1: ("shared", "#ff7f0e"), 2: ("machine", "#d62728")}
 SET_CLASS = {0: ("safe", "#b7e1a1"), 1: ("hysteresis", "#fdd49e"), 2: ("hazard", "#f4606c")}
-LAW_ROLE = {0: ("tracking role", "#9467bd"), 1: ("hazard role", "#8c2d04")}   # while engaged; nce's hazard law is (12)
-CONTROLLERS = {  # colour, the paper's law, a short legend label
-    "ce": ("#1f77b4", "(46) with (12), certainty-equivalent", "(46)+(12) certainty-equiv."),
-    "nce": ("#2ca02c", "(46) with NCE: (12) and a composite update on the filters (14)–(15)", "(46)+NCE composite"),
-    "of": ("#9467bd", "(47) with (25)–(29), output feedback + observer (40)", "(47) output feedback"),
-}
+LAW_ROLE = {0: ("tracking role", "#9467bd"), 1: ("hazard role", "#8c2d04")}   # while engaged (MachineController)
+CONTROLLER_COLOURS = {"ce": "#1f77b4", "nce": "#2ca02c", "of": "#9467bd"}
 FEASIBLE_FILL, OBSTACLE_FILL = "#e3f2dc", "#e6e6e6"
 PARAMETER_UNITS = {"m1": "kg", "m3": "kg·m²", "a": "kg"}  # the omni robot's θ (Section 5)
 FONT = {"font.size": 10, "axes.titlesize": 11, "axes.labelsize": 10, "legend.fontsize": 8.5}
@@ -46,6 +45,7 @@ class Run:
     controller: str    # "ce" | "nce" | "of"
     trace: object      # sharedctl.simulator.Trace
     loop: object       # sharedctl.simulator.ClosedLoop
+    law: str           # what the configuration ran, e.g. "(46) with (12)"
 
 
 @dataclass(frozen=True)
@@ -336,7 +336,7 @@ def authority_panel(ax, trace, loop=None) -> None:
     handles += [Patch(color=c, label=f"authority: {n}") for n, c in AUTHORITY.values()]
     handles += [Patch(color=c, label=f"law: {n}") for n, c in LAW_ROLE.values()]
     if loop is not None and loop.controller.hazard is not loop.controller.tracking:
-        handles[-1] = Patch(color=LAW_ROLE[1][1], label="law: hazard role = (12)")
+        handles[-1] = Patch(color=LAW_ROLE[1][1], label=f"law: hazard role, the {loop.controller.hazard.name} law")
     _legend(ax, handles, fontsize=7.5)
     switches = int(trace.switches)
     ax.set_title(f"Authority: set class, $k_s$, machine law, weights ({switches} switches)")
@@ -448,14 +448,15 @@ def comparison_figure(runs: Sequence[Run], title: str) -> Figure:
         ax.plot(runs[0].trace.q_d[:, 0], runs[0].trace.q_d[:, 1], "--", color="k", lw=1.4, zorder=3)
         handles.append(Line2D([], [], color="k", ls="--", label="$q_d$ (operator's desired)"))
         for r in runs:
-            colour = CONTROLLERS[r.controller][0]
+            colour = CONTROLLER_COLOURS[r.controller]
             ax.plot(r.trace.q[:, 0], r.trace.q[:, 1], color=colour, lw=2.0, zorder=4, alpha=0.85)
             draw_direction_arrows(ax, r.trace.q[:, :2], colour, count=6, size=18)
-            handles.append(Line2D([], [], color=colour, lw=2, label=f"{r.controller}: {CONTROLLERS[r.controller][2]}"))
+            handles.append(Line2D([], [], color=colour, lw=2,
+                                  label=textwrap.fill(f"{r.controller}: {r.law}", 44, subsequent_indent="    ")))
         handles += _start_end(ax, runs[0].trace)
         for r in runs:   # each run's own end (a run that diverged stops early)
             end = r.trace.q[np.all(np.isfinite(r.trace.q), axis=1)][-1, :2]
-            ax.plot(*end, "s", color=CONTROLLERS[r.controller][0], mec="k", ms=9, zorder=8)
+            ax.plot(*end, "s", color=CONTROLLER_COLOURS[r.controller], mec="k", ms=9, zorder=8)
         _plane_axes(ax, loop, "All controllers (arrows: direction of travel)")
         authority = []
         for k, r in enumerate(runs[:3]):
@@ -482,24 +483,25 @@ def paper_figures(runs: Sequence[Run]) -> Iterator[PaperFigure]:
     """Figures 1–8 of Section 5, one at a time (save and drop each before the next is drawn).
 
     Numbering follows the paper whatever subset of controllers ran: scenario "convex" is
-    Figure 1 (paths) and 2/3/4 (ce/nce/of); "nonconvex" is 5 and 6/7/8.
+    Figure 1 (paths) and 2/3/4 (ce/nce/of); "nonconvex" is 5 and 6/7/8. Every caption names
+    the law of each run it shows (`Run.law`).
     """
-    order = list(CONTROLLERS)
+    order = list(CONTROLLER_COLOURS)
     scenarios = list(dict.fromkeys(r.scenario for r in runs))
     for s_index, scenario in enumerate(scenarios):
         base = PAPER_NUMBERS.get(scenario, 1 + 4 * (s_index + len(PAPER_NUMBERS)))
         group = sorted((r for r in runs if r.scenario == scenario), key=lambda r: order.index(r.controller))
         where = PAPER_SET_NAMES.get(scenario, scenario)
-        caption = f"Trajectory tracking under the {where}: {', '.join(r.controller for r in group)} paths"
+        title = f"Trajectory tracking under the {where}: {', '.join(r.controller for r in group)}"
+        laws = "; ".join(f"{r.controller} — {r.law}" for r in group)
         yield PaperFigure(f"fig{base}_{scenario}_trajectory.png",
-                          caption.replace("$", "")
-                          + " in the shaded feasible set, arrows along the direction of travel",
-                          comparison_figure(group, f"Figure {base}. {caption}"))
+                          f"{title}, in the shaded feasible set, arrows along the direction of travel ({laws})"
+                          .replace("$", ""),
+                          comparison_figure(group, f"Figure {base}. {title}"))
         for r in group:
             number = base + 1 + order.index(r.controller)
-            law = CONTROLLERS[r.controller][1]
-            caption = f"System response based on {law} under the {where}"
+            title = f"System response — {r.controller}: {r.law}, under the {where}"
             extra = "wheel torques" if hasattr(r.loop.model, "wheel_torques") else "margin"
             yield PaperFigure(f"fig{number}_{scenario}_{r.controller}.png",
-                              caption.replace("$", "") + f": q, q̇, u_h, u_f, u_s, {extra}, authority, θ̂",
-                              response_figure(r.trace, r.loop, f"Figure {number}. {caption}"))
+                              title.replace("$", "") + f": q, q̇, u_h, u_f, u_s, {extra}, authority, θ̂",
+                              response_figure(r.trace, r.loop, textwrap.fill(f"Figure {number}. {title}", 120)))

@@ -63,11 +63,13 @@ class Decisions:
 
 
 def arbitrate(table: GroupTable, params: SharingParameters, state: ArbiterArrays, situation: Situation,
-              row_x: np.ndarray, missed: np.ndarray, chosen: np.ndarray, intent: np.ndarray, dt: float):
+              row_x: np.ndarray, missed: np.ndarray, chosen: np.ndarray, intent: np.ndarray, dt: float,
+              push_away: np.ndarray | None = None):
     """One sample of the sharing function for every robot; returns (new state, decisions).
 
     `row_x` (P, N) is k q + t of every distinct row, `missed` (G, N) the hazardous rows each group
-    misses and `chosen` (N,) the result of select_group for this sample.
+    misses and `chosen` (N,) the result of select_group for this sample; `push_away` (N,): has each
+    operator's push turned away (sharing.push_turned_away; None: unknown, release in the safe set only).
     """
     N = intent.size
     overall = situation.overall
@@ -78,6 +80,7 @@ def arbitrate(table: GroupTable, params: SharingParameters, state: ArbiterArrays
                                 np.zeros(N, bool), np.zeros(N, bool))
     hazard = overall == HAZARD
     safe = overall == SAFE
+    wish_ok = np.zeros(N, bool) if push_away is None else push_away
     arange = np.arange(N)
 
     # k_s: the Schmitt trigger
@@ -87,7 +90,8 @@ def arbitrate(table: GroupTable, params: SharingParameters, state: ArbiterArrays
         latched = np.ones(N, bool)
     else:
         machine_time = np.where(hazard & ~before, 0.0, machine_time)
-        latched = (before | hazard) & ~(safe & (machine_time >= params.min_machine_dwell))
+        release = ~hazard & (machine_time >= params.min_machine_dwell) & (safe | wish_ok)
+        latched = (before | hazard) & ~release
     switches = state.switches + ((latched != before) & (mode is Mode.SHARED))
 
     # law role, with the law-level trigger: back to tracking when safe and clear of the faces
@@ -113,10 +117,10 @@ def arbitrate(table: GroupTable, params: SharingParameters, state: ArbiterArrays
 
     # weights
     machine = np.full(N, mode is Mode.MACHINE) | hazard
-    target = 1.0 - np.exp(-np.maximum(intent, 0.0))
+    target = wish_ok.astype(float)
     blend = state.k_h + (target - state.k_h) * (1.0 - math.exp(-dt / params.blend_time_constant))
     k_h = np.where(~latched, 1.0, np.where(machine, 0.0, blend))
-    authority = np.where(~latched, HUMAN, np.where(machine, MACHINE, SHARED))
+    authority = np.where(~latched, HUMAN, np.where(k_h == 0.0, MACHINE, SHARED))
 
     new = ArbiterArrays(latched, group, role, k_h, np.where(latched, machine_time, 0.0), switches,
                         state.group_switches + (group_changed & has_old))

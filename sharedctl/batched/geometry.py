@@ -207,6 +207,21 @@ def group_row_values(table: GroupTable, row_values: np.ndarray, group: np.ndarra
     return row_values.take(index)
 
 
+def wish_admissible(table: GroupTable, qd: np.ndarray, epsilon: float) -> np.ndarray:
+    """(N,): is each robot's wish q_d inside Q_a by at least ε (sharing.wish_admissible)?"""
+    m = table.row_K @ qd
+    m += table.row_T
+    return np.any((table.region_sel @ (m > -epsilon)) == 0.0, axis=0)
+
+
+def push_turned_away(table: GroupTable, row_x: np.ndarray, u_h: np.ndarray, wish_ok: np.ndarray,
+                     containing: np.ndarray, bands: Bands) -> np.ndarray:
+    """(N,): sharing.push_turned_away per robot — the wish admissible (`wish_ok`) and, in some region
+    containing q (`containing`, (R, N)), k_j u_h ≤ 0 on every row with −b_s < k_j q + t_j (`row_x`, (P, N))."""
+    pushing = (row_x > -bands.standoff) & (table.row_K @ u_h > 0.0)
+    return wish_ok & np.any(containing & ((table.region_sel @ pushing) == 0.0), axis=0)
+
+
 def projected_configuration(table: GroupTable, shifted_reference: np.ndarray, group: np.ndarray) -> np.ndarray:
     """q_r = K⁻¹(x_r − T) of each robot's `group` (n, N); NaN where the group is −1."""
     g = np.maximum(group, 0)
@@ -240,7 +255,7 @@ def classify(table: GroupTable, rows: RowValues, bands: Bands) -> Situation:
     negative = x < 0.0
     near = negative & (x >= -bands.b1)
     hazard = near & ((x_dot >= allowance(x, bands.b1)) | ((x >= -bands.b0) & (x_dot > 0.0)))
-    unsafe = (x >= -bands.b2) & (x_dot > allowance(x, bands.b2))
+    unsafe = ((x >= -bands.b2) & (x_dot > allowance(x, bands.b2))) | (x > -bands.standoff)
     containing = (table.region_sel @ ~negative) == 0.0
     any_hazard = (table.region_sel @ hazard) > 0.0
     any_unsafe = (table.region_sel @ unsafe) > 0.0

@@ -9,6 +9,7 @@ operations) are those of the scalar laws:
 * the composite law of the NCE configuration ((12) + prediction error on (14)–(15)'s filters),
   state [p_n, W_n, u_n];
 * (25)–(29) output feedback, state [z_f, ξ];
+* the output-feedback configuration's barrier law on v̂ (docs/control.md §4.3), no state;
 * (40) the velocity observer on q, state [q̂, β_o].
 """
 from __future__ import annotations
@@ -17,7 +18,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..controllers import CertaintyEquivalentLaw, CompositeAdaptiveLaw, OutputFeedbackLaw, VelocityObserver
+from ..controllers import (
+    CertaintyEquivalentLaw,
+    CompositeAdaptiveLaw,
+    OutputFeedbackBarrierLaw,
+    OutputFeedbackLaw,
+    VelocityObserver,
+)
 from ..controllers.base import diag_gain
 from . import plant
 from .geometry import saturate
@@ -139,6 +146,22 @@ def _error_signals(frame: GroupFrame, c: Coordinates, v, lam):
     return np.subtract(v, v_ref, out=w), v_ref, a_ref
 
 
+def _bounded_error_signals(frame: GroupFrame, c: Coordinates, v, lam):
+    """(p, v_ref, v̇_ref) of transform.bounded_reference_signals: μ = −λ tanh z,
+    v_ref = K⁻¹[x (ẋ_r/x_r + μ)], v̇_ref = K⁻¹[ẋ (ẋ_r/x_r + μ + μ′) − x (ẋ_r/x_r)(ẋ_r/x_r + μ′) + e^z ẍ_r],
+    ẋ = K v, p = v − v_ref (the same order of operations)."""
+    r = c.ref
+    rate = r.rate
+    tz = np.tanh(c.z)
+    mu = -lam * tz
+    dmu = -lam * (1.0 - tz * tz)
+    kv = matvec(frame.K, v)
+    v_ref = matvec(frame.K_inv, c.x * (rate + mu))
+    lifted_a = kv * (rate + mu + dmu) - c.x * rate * (rate + dmu) + np.exp(c.z) * r.x_r_ddot
+    a_ref = matvec(frame.K_inv, lifted_a)
+    return v - v_ref, v_ref, a_ref
+
+
 class CertaintyEquivalent:
     """(12)."""
 
@@ -161,6 +184,36 @@ class CertaintyEquivalent:
         u -= rmatvec(frame.K, np.divide(c.z, c.x))
         u += plant.regressor_times(v, v_ref, a_ref, theta_hat)
         theta_dot = plant.regressor_transpose_times(v, v_ref, a_ref, p)
+        theta_dot /= -self.gamma
+        return u, theta_dot, None
+
+    def estimate(self, theta_hat, state):
+        return theta_hat
+
+
+class OutputFeedbackBarrier:
+    """The OF configuration's barrier law on the observer's v̂ (OutputFeedbackBarrierLaw)."""
+
+    state_size = 0
+    projects_estimate = True
+    applied_input = None
+
+    def __init__(self, law: OutputFeedbackBarrierLaw, n: int):
+        self.lam = law.lam
+        self.minus_kp = -diag_gain(law.Kp, n)[:, None]
+        self.gamma = law.gamma_theta
+        self.kb = law.barrier_weight
+
+    def initial_state(self, z, p):
+        return np.zeros((0, z.shape[1]))
+
+    def evaluate(self, frame, c, v_hat, theta_hat, state):
+        p_hat, v_ref, a_ref = _bounded_error_signals(frame, c, v_hat, self.lam)
+        u = np.multiply(self.minus_kp, p_hat)
+        slope = c.z + self.kb * np.minimum(c.z, 0.0)                              # V′(z)
+        u -= rmatvec(frame.K, np.divide(slope, c.x))
+        u += plant.regressor_times(v_hat, v_ref, a_ref, theta_hat)
+        theta_dot = plant.regressor_transpose_times(v_hat, v_ref, a_ref, p_hat)
         theta_dot /= -self.gamma
         return u, theta_dot, None
 

@@ -13,10 +13,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..controllers import CertaintyEquivalentLaw, CompositeAdaptiveLaw, OutputFeedbackLaw
+from ..controllers import CertaintyEquivalentLaw, CompositeAdaptiveLaw, OutputFeedbackBarrierLaw, OutputFeedbackLaw
 from .arbiter import ArbiterArrays
 from .geometry import GroupTable
-from .laws import CertaintyEquivalent, CompositeAdaptive, Observer, OutputFeedback
+from .laws import CertaintyEquivalent, CompositeAdaptive, Observer, OutputFeedback, OutputFeedbackBarrier
 from .problem import BatchProblem, StateLayout
 from .results import BatchResult, Recording, Tally, finish
 from .step import StepKernel
@@ -65,6 +65,8 @@ def _vector_law(law, n: int, n_theta: int):
         return CompositeAdaptive(law, n, n_theta)
     if isinstance(law, OutputFeedbackLaw):
         return OutputFeedback(law, n)
+    if isinstance(law, OutputFeedbackBarrierLaw):
+        return OutputFeedbackBarrier(law, n)
     raise TypeError(f"no batched form of {type(law).__name__}")
 
 
@@ -86,6 +88,7 @@ class Engine:
         self.law_of_role = np.array([self.distinct.index(law) for law in self.laws])   # by LawRole: distinct index
         self.state_size = np.array([law.state_size for law in self.laws])
         self.projects = np.array([law.projects_estimate for law in self.laws])
+        self._own = np.array([controller.owns(law) for law in (controller.tracking, controller.hazard)])  # by LawRole
         self.observer = Observer(controller.observer, self.n) if controller.observer else None
         self.layout = StateLayout(self.n, self.k, int(self.state_size.max()), 2 * self.n if self.observer else 0)
         self.kernel = StepKernel(self)
@@ -93,6 +96,11 @@ class Engine:
     def runs(self, index: int, roles: np.ndarray) -> np.ndarray:
         """Which of `roles` (LawRole values, −1 for none) run the distinct law `index`."""
         return (roles >= 0) & self._serves[index][np.maximum(roles, 0)]
+
+    def owns(self, roles: np.ndarray) -> np.ndarray:
+        """Which of `roles` (LawRole values, −1 for none) run a law of the configuration
+        (MachineController.owns)."""
+        return (roles >= 0) & self._own[np.maximum(roles, 0)]
 
     def run(self, problem: BatchProblem, ids, steps: int, out: "_Totals", recording) -> None:
         L, N = self.layout, ids.size

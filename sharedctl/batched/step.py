@@ -20,6 +20,8 @@ from ..sharing import Mode
 from .arbiter import HUMAN, MACHINE, arbitrate
 from .geometry import (
     RowValues, all_groups, classify, missed_rows, projected_configuration, reference_inside, row_reference,
+    push_turned_away,
+    wish_admissible,
     select_group,
 )
 from .laws import GroupFrame, coordinates, gather, projected_reference, scatter
@@ -32,18 +34,19 @@ class StepKernel:
 
     def __init__(self, engine):
         self.e = engine
-        self._reference = (None, None, None)
+        self._reference = (None, None, None, None)
 
     def reference(self, wish):
-        """(RowReference, reference_inside) of `wish`; a wish that is the same object as the last
-        step's (a point wish, operators.py) keeps its values."""
-        last, row_ref, ref_ok = self._reference
+        """(RowReference, reference_inside, wish_admissible) of `wish`; a wish that is the same object as
+        the last step's (a point wish, operators.py) keeps its values."""
+        last, row_ref, ref_ok, wish_ok = self._reference
         if wish is not last:
             table = self.e.table
             row_ref = row_reference(table, wish.q, wish.q_dot, self.e.shape)
             ref_ok = reference_inside(table, row_ref.shifted)
-            self._reference = (wish, row_ref, ref_ok)
-        return row_ref, ref_ok
+            wish_ok = wish_admissible(table, wish.q, self.e.shape.epsilon)
+            self._reference = (wish, row_ref, ref_ok, wish_ok)
+        return row_ref, ref_ok, wish_ok
 
     def step(self, fleet, k: int, steps: int, recording):
         """Advance `fleet` by one step; returns (stopping columns, their Trace.finite) or None."""
@@ -61,13 +64,14 @@ class StepKernel:
             u_h0, intent = np.zeros_like(q), np.zeros(N)
         else:
             u_h0, intent = ops.command(wish, q, v)
-        row_ref, ref_ok = self.reference(wish)
+        row_ref, ref_ok, wish_ok = self.reference(wish)
         groups = all_groups(table, q, v_meas, row_ref, e.lam)
         situation = classify(table, groups.rows, e.sharing.bands)
         missed = missed_rows(table, situation)
         chosen = select_group(table, situation, groups.value, missed, ref_ok)
+        push_away = push_turned_away(table, groups.rows.x, u_h0, wish_ok, situation.containing, e.sharing.bands)
         fleet.arbiter, dec = arbitrate(table, e.sharing, fleet.arbiter, situation, groups.rows.x, missed, chosen,
-                                       intent, dt)
+                                       intent, dt, push_away)
 
         # --- law (re)initialisation, as in simulator.simulate --------------------------------
         engaged = (dec.authority != HUMAN) & (dec.group >= 0)
@@ -248,7 +252,7 @@ class StepKernel:
         extra = {"v_hat": v_meas, "q_d": wish.q, "u_h": u_h, "u_f": u_f, "set_class": dec.overall, "group": dec.group,
                  "role": dec.role, "k_h": dec.k_h, "k_f": dec.k_f, "intent": intent,
                  "true_class": self.true_class(Y, groups, situation),
-                 "own_law": engaged & self.e.runs(0, dec.role)}          # distinct law 0 is the tracking law
+                 "own_law": engaged & self.e.owns(dec.role)}             # MachineController.owns
         rows = Rows(t, Y[L.q], Y[L.v], q_r, u_s, estimate, dec.authority, situation.margin, situation.inside, extra)
         if escaped.any():
             # simulator.simulate records only t, q, v, margin and inside when the first stage escapes

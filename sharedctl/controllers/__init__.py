@@ -4,6 +4,7 @@ from .certainty_equivalent import CertaintyEquivalentLaw
 from .composite_adaptive import CompositeAdaptiveLaw
 from .non_certainty_equivalent import NonCertaintyEquivalentLaw
 from .output_feedback import OutputFeedbackLaw
+from .output_feedback_barrier import OutputFeedbackBarrierLaw
 from .observer import VelocityObserver
 
 __all__ = [
@@ -13,5 +14,6 @@ __all__ = [
     "CompositeAdaptiveLaw",
     "NonCertaintyEquivalentLaw",
     "OutputFeedbackLaw",
+    "OutputFeedbackBarrierLaw",
     "VelocityObserver",
 ]

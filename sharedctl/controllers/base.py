@@ -2,7 +2,7 @@
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
-from typing import NamedTuple
+from typing import ClassVar, NamedTuple
 
 import numpy as np
 
@@ -28,6 +28,9 @@ class MachineLaw(ABC):
     """
 
     name: str
+    #: the configuration (make_controller's kind: "ce", "nce", "of") the law belongs to: a sample
+    #: whose u_f comes from a law of another configuration (a fallback) is not the configuration's own
+    configuration: ClassVar[str] = ""
     #: λ_q of (11): sets p and the selection Lyapunov value
     lam: float = 1.0
     #: whether θ̂ may be projected onto the model's parameter box after each step (gradient

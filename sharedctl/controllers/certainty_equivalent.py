@@ -13,6 +13,7 @@ group's rows negative from any initial state with finite L.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import ClassVar
 
 import numpy as np
 
@@ -29,6 +30,7 @@ class CertaintyEquivalentLaw(MachineLaw):
     lam: float = 1.5
     gamma_theta: float = 0.5
     name: str = field(default="ce", init=False)
+    configuration: ClassVar[str] = "ce"
 
     def state_size(self, model) -> int:
         return 0

@@ -30,6 +30,7 @@ docs/control.md §4.2.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import ClassVar
 
 import numpy as np
 
@@ -53,6 +54,7 @@ class CompositeAdaptiveLaw(MachineLaw):
     gamma_n: float = 30.0
     nu: float = 1.0
     name: str = field(default="nce", init=False)
+    configuration: ClassVar[str] = "nce"
 
     def __post_init__(self):
         if abs(self.alpha_n - self.k_q) < 1e-9:

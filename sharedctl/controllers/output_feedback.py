@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from typing import ClassVar
 
 import numpy as np
 
@@ -40,6 +41,7 @@ class OutputFeedbackLaw(MachineLaw):
     sign_width: float = 0.05
     lam: float = 1.0      # only for the selection Lyapunov value in sharing.py
     name: str = field(default="of", init=False)
+    configuration: ClassVar[str] = "of"
 
     def state_size(self, model) -> int:
         return 2 * model.n

@@ -65,6 +65,7 @@ class PlanarArm(EulerLagrangeModel):
         "ce": {"Kp": 5.0, "lam": 1.5, "gamma_theta": 5.0},
         "nce": {"gamma_n": 20.0},
         "of": {"stiffness": 3.0},
+        "of_barrier": {"Kp": 10.0, "gamma_theta": 5.0, "barrier_weight": 0.2},
     }
 
     @property

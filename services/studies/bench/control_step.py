@@ -22,7 +22,7 @@ import numpy as np
 
 from sharedctl.sampled import simulate_sampled
 from sharedctl.scenario import parse
-from sharedctl.sharing import Authority, arbitrate
+from sharedctl.sharing import Authority, arbitrate, push_turned_away
 from sharedctl.shared_controller import OperatorInput, SharedController
 from sharedctl.transform import all_groups, coordinates
 
@@ -132,7 +132,9 @@ def breakdown(law: str = "ce", repeats: int = 2000) -> dict:
     parts = {
         "row_values": lambda: feasible.row_values(q_list, v_list),
         "arbitrate": lambda: arbitrate(feasible, loop.sharing, state.arbiter, q, v_used, operator.intent, PERIOD,
-                                       values.__getitem__, [True] * len(values), rows),
+                                       values.__getitem__, [True] * len(values), rows,
+                                       push_turned_away(feasible, q_list, operator.desired.q, operator.force,
+                                                        reference.epsilon, loop.sharing.bands)),
         "coordinates": lambda: coordinates(grp, q_list, v_list, operator.desired, reference, group_rows),
         "law_evaluate": lambda: law_.evaluate(loop.model, grp, c, q, v_used, state.theta_hat, state.law_state),
         "region_margins": lambda: feasible.region_margins(q, rows[0]),

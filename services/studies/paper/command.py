@@ -4,10 +4,13 @@ Runs both packaged scenarios (paper_convex, paper_nonconvex) with each machine l
 into DIR:
 
 * fig1_convex_trajectory.png … fig8_nonconvex_of.png — Figures 1–8 of Tang & Sun (2025);
-* summary.md — the metrics table, and one line per figure saying what it shows;
-* summary.json — the same numbers, one record per run (the `sharedctl sim --json` fields).
+* summary.json — one record per scenario and law: the `sharedctl sim --json` fields, the applied
+  force's and the wheel torques' sizes, the time of full machine authority (table.py), each
+  figure's caption, and what each configuration runs (laws.py);
+* summary.md — rendered from summary.json: the table, Remark 3's θ errors, the captions.
 
-Simulations run in a process pool (`simulate` is pure); figures are drawn afterwards.
+Simulations run in a process pool (`simulate` is pure); figures are drawn afterwards. Every
+caption and record names its law from laws.describe, read off the controller that ran.
 Exit code 0 only if every run stayed inside Q_a (0 violations) and finite; 1 otherwise.
 """
 from __future__ import annotations
@@ -21,11 +24,12 @@ from contextlib import closing
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from pathlib import Path
 
-from sharedctl.metrics import summarize
 from sharedctl.scenario import ScenarioError
 from sharedctl.simulator import simulate
 
 from sharedctl.services.scenario_files import load
+from sharedctl.services.studies.paper.laws import ConfigurationMismatch, describe
+from sharedctl.services.studies.paper.table import metrics_table, run_record, summary_markdown
 
 SCENARIOS = ("paper_convex", "paper_nonconvex")
 CONTROLLERS = ("ce", "nce", "of")
@@ -62,11 +66,11 @@ def _controller_list(text: str) -> tuple[str, ...]:
 
 
 def simulate_one(scenario_name: str, controller: str, duration: float | None):
-    """One run (in a worker process): (trace, summary). Pure apart from reading the packaged file."""
+    """One run (in a worker process): (trace, its table record). Pure apart from reading the packaged file."""
     scenario = load(scenario_name)
     loop, q0, v0 = scenario.closed_loop(controller)
     trace = simulate(loop, q0, v0, duration or scenario.duration, scenario.dt)
-    return trace, summarize(trace, scenario.dt)
+    return trace, run_record(scenario, controller, describe(controller, loop.controller), trace, loop)
 
 
 def run(args) -> int:
@@ -76,27 +80,26 @@ def run(args) -> int:
     out.mkdir(parents=True, exist_ok=True)
     try:
         scenarios = {name: load(name) for name in SCENARIOS}
-    except ScenarioError as exc:
+        loops = {(name, c): scenarios[name].closed_loop(c)[0] for name in SCENARIOS for c in args.controllers}
+        laws = {key: describe(key[1], loop.controller) for key, loop in loops.items()}
+    except (ScenarioError, ConfigurationMismatch) as exc:
         print(f"sharedctl paper: {exc}", file=sys.stderr)
         return 2
-    jobs = [(name, c) for name in SCENARIOS for c in args.controllers]
+    jobs = list(loops)
     started = time.perf_counter()
     results: dict[tuple[str, str], tuple] = {}
     with _Reporter() as report:
         sims = report.task("simulating", len(jobs))
         try:
             with closing(_run_all(jobs, args.duration, max(1, args.jobs))) as finished:   # closing: pool shut down
-                for (name, c), (trace, summary) in finished:
-                    results[(name, c)] = (trace, summary)
-                    report.advance(sims, f"{name} {c}: {summary['steps']} steps, {summary['violations']} "
-                                         f"violations, min margin {summary['min_margin']:.4g}")
+                for (name, c), (trace, record) in finished:
+                    results[(name, c)] = (trace, record)
+                    report.advance(sims, f"{name} {c}: {record['steps']} steps, {record['violations']} "
+                                         f"violations, min margin {record['min_margin']:.4g}")
         except Exception as exc:  # noqa: BLE001 — a failed run must still leave a clear message and a non-zero exit
             print(f"sharedctl paper: simulation failed: {exc!r}", file=sys.stderr)
             return 1
-        runs = []
-        for name, c in jobs:
-            loop, _, _ = scenarios[name].closed_loop(c)
-            runs.append(Run(_short(name), c, results[(name, c)][0], loop))
+        runs = [Run(_short(name), c, results[(name, c)][0], loops[(name, c)], laws[(name, c)]) for name, c in jobs]
         figures = []
         drawing = report.task("drawing", (len(args.controllers) + 1) * len(SCENARIOS))
         for pf in paper_figures(runs):
@@ -104,27 +107,32 @@ def run(args) -> int:
             figures.append({"file": pf.filename, "caption": pf.caption})
             report.advance(drawing, pf.filename)
 
-    records = []
-    for (name, c), r in zip(jobs, runs):
-        summary = results[(name, c)][1]
-        records.append({
-            "scenario": scenarios[name].name, "controller": c, **summary,
-            "parameter_names": list(r.loop.model.parameter_names),
-            "theta_true": [float(x) for x in r.loop.model.theta],
-            "dt": scenarios[name].dt,
-        })
-    ok = all(rec["violations"] == 0 and rec["finite"] for rec in records)
-    document = _plain({"ok": ok, "runs": records, "figures": figures})
+    document = paper_document([results[key][1] for key in jobs], figures)
     (out / "summary.json").write_text(json.dumps(document, indent=2) + "\n")
-    (out / "summary.md").write_text(summary_markdown(records, figures, args, ok))
-    print(metrics_table(records))
-    print(f"\n{'all runs inside Q_a and finite' if ok else 'FAILED: a run left Q_a or diverged'}; "
+    (out / "summary.md").write_text(summary_markdown(document, command_line(args)))
+    print(metrics_table(document["runs"]))
+    print(f"\n{'all runs inside Q_a and finite' if document['ok'] else 'FAILED: a run left Q_a or diverged'}; "
           f"wrote {len(figures)} figures, summary.md, summary.json to {out} in {time.perf_counter() - started:.1f} s")
-    return 0 if ok else 1
+    return 0 if document["ok"] else 1
+
+
+def paper_document(records: list[dict], figures: list[dict]) -> dict:
+    """summary.json: ok, what each configuration runs, one record per scenario and law, the figures' captions."""
+    ok = all(r["violations"] == 0 and r["finite"] for r in records)
+    configurations = {r["controller"]: r["law"] for r in records}
+    return _plain({"ok": ok, "configurations": configurations, "runs": records, "figures": figures})
+
+
+def command_line(args) -> str:
+    """The command that reproduces the output (the output directory as DIR)."""
+    options = "".join([f" --duration {args.duration:g}" if args.duration else "",
+                       f" --controllers {','.join(args.controllers)}"
+                       if tuple(args.controllers) != CONTROLLERS else ""])
+    return f"sharedctl paper --out DIR{options}"
 
 
 def _run_all(jobs, duration, workers):
-    """Yield ((scenario, controller), (trace, summary)) as runs finish; the pool is always shut down."""
+    """Yield ((scenario, controller), (trace, record)) as runs finish; the pool is always shut down."""
     if workers == 1:
         for name, c in jobs:
             yield (name, c), simulate_one(name, c, duration)
@@ -151,63 +159,6 @@ def _plain(value):
     if isinstance(value, (list, tuple)):
         return [_plain(v) for v in value]
     return value
-
-
-def _number(x, digits=4) -> str:
-    return "–" if x is None or (isinstance(x, float) and not math.isfinite(x)) else f"{x:.{digits}g}"
-
-
-def metrics_table(records: list[dict]) -> str:
-    head = ("scenario", "controller", "violations", "min_margin (m)", "tracking_rmse (m)", "final_error (m)",
-            "human_authority", "switches", "θ̂ final", "true θ", "finite", "steps")
-    rows = ["| " + " | ".join(head) + " |", "|" + "|".join("---" for _ in head) + "|"]
-    for r in records:
-        cells = (r["scenario"], r["controller"], str(r["violations"]), _number(r["min_margin"]),
-                 _number(r["tracking_rmse"]), _number(r["final_error"]), f"{r['human_authority']:.3f}",
-                 str(r["switches"]), "[" + ", ".join(_number(x, 3) for x in r["theta_hat"]) + "]",
-                 "[" + ", ".join(_number(x, 3) for x in r["theta_true"]) + "]", "yes" if r["finite"] else "NO",
-                 str(r["steps"]))
-        rows.append("| " + " | ".join(cells) + " |")
-    return "\n".join(rows)
-
-
-def summary_markdown(records: list[dict], figures: list[dict], args, ok: bool) -> str:
-    options = "".join([f" --duration {args.duration:g}" if args.duration else "",
-                       f" --controllers {','.join(args.controllers)}"
-                       if tuple(args.controllers) != CONTROLLERS else ""])
-    durations = ", ".join(f"{r['scenario']} {r['duration']:g} s" for r in records[:: max(1, len(args.controllers))])
-    names = ", ".join(records[0]["parameter_names"]) if records else ""
-    lines = [
-        "# Section 5 of Tang & Sun (2025), reproduced",
-        "",
-        f"Generated by `sharedctl paper --out DIR{options}`: omnidirectional robot, shared control with the",
-        f"scripted operator, RK4 at dt = {records[0]['dt'] * 1e3:g} ms; {durations}." if records else "",
-        "",
-        "## Metrics",
-        "",
-        metrics_table(records),
-        "",
-        "- violations: samples with q outside Q_a; min_margin: smallest slack to the nearest face of the best region;",
-        "- tracking_rmse / final_error: |q − q_r| against the machine's projected reference q_r;",
-        "- human_authority: fraction of samples with u_s = u_h; switches: human ↔ machine authority changes;",
-        f"- θ̂ final / true θ: [{names}] at the end of the run (θ̂(0) = 0).",
-        "",
-        *_law_notes(records),
-        f"Result: {'every run stayed inside Q_a and finite.' if ok else '**a run left Q_a or diverged.**'}",
-        "",
-        "## Figures",
-        "",
-    ]
-    lines += [f"- `{f['file']}` — {f['caption']}." for f in figures]
-    return "\n".join(lines) + "\n"
-
-
-def _law_notes(records: list[dict]) -> list[str]:
-    """Say plainly when a run's configured law never ran while the machine acted (`law_share` 0: another law did)."""
-    notes = [f"- {r['scenario']} {r['controller']}: the machine acted, but never through this configuration's own "
-             f"law (`law_share` 0) — the run is driven by the hazard law (12)." for r in records
-             if r.get("law_share") == 0.0]
-    return notes + [""] if notes else []
 
 
 class _Reporter:

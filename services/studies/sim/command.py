@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import sys
 
-from sharedctl.metrics import summarize
+from sharedctl.metrics import handover, summarize
 from sharedctl.scenario import ScenarioError
 from sharedctl.simulator import simulate
 
@@ -30,7 +30,8 @@ def run(args) -> int:
         return 2
     duration = args.duration or scenario.duration
     trace = simulate(loop, q0, v0, duration, scenario.dt)
-    summary = {"scenario": scenario.name, "controller": loop.controller.name, **summarize(trace, scenario.dt)}
+    summary = {"scenario": scenario.name, "controller": loop.controller.name, **summarize(trace, scenario.dt),
+               **handover(trace)}
     emit(summary, args.json, _print_table)
     if args.plot:
         from sharedctl.services.studies.figures import run_figure
