@@ -131,6 +131,12 @@ def test_the_transport_reads_what_a_python_can_bus_sends_with_its_kernel_arrival
     # if they are the kernel's, microseconds apart if they were taken when read. A difference of one clock,
     # not a comparison with time.time() at chosen instants, so a stepped wall clock cannot fail it.
     transport, gap = transports[0], 0.2
+    # Linux turns receive timestamping on for the whole stack lazily (a deferred static key) when the
+    # first socket asks for it; a datagram queued before that carries no stamp and gets the time it is
+    # read. One frame sent and read first lets that settle.
+    python_can.send(can.Message(arbitration_id=0x001, data=b"", is_extended_id=False))
+    assert transport.recv(1.0) is not None
+    time.sleep(gap)
     for arbitration_id, remote, dlc, data in SENT:
         python_can.send(can.Message(arbitration_id=arbitration_id, is_remote_frame=remote, dlc=dlc,
                                     data=None if remote else data, is_extended_id=False))
