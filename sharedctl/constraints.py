@@ -194,6 +194,11 @@ class FeasibleSet:
         return [values[i] for i in picks], [rates[i] for i in picks]
 
     @property
+    def row_matrix(self) -> np.ndarray:
+        """Every region's rows K stacked, in the order of `row_values`."""
+        return self._rows.K
+
+    @property
     def row_spans(self) -> tuple[tuple[int, int], ...]:
         """(first, end) row of each region in the stacked rows of `row_values`."""
         return self._rows.spans

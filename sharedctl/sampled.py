@@ -28,7 +28,7 @@ def hold_and_integrate(model, q, v, u, h: float, substeps: int):
 def simulate_sampled(loop: ClosedLoop, q0, v0, duration: float, control_period: float, substeps: int = 4) -> Trace:
     """Plant RK4 at control_period/substeps with u_s held; controller stepped every control_period."""
     model, human = loop.model, loop.human
-    ctrl = SharedController(model, loop.feasible, loop.controller, loop.sharing, loop.reference)
+    ctrl = SharedController(model, loop.feasible, loop.controller, loop.sharing, loop.reference, loop.backup)
     state = ctrl.initial_state(q0, loop.theta_hat0)
     q, v = np.asarray(q0, float).copy(), np.asarray(v0, float).copy()
     steps = int(round(duration / control_period))

@@ -22,6 +22,7 @@ from dataclasses import dataclass, field, fields
 
 import numpy as np
 
+from .backup import omni_backup
 from .constraints import FeasibleSet, Polytope
 from .human import AdversarialOperator, CircleTrajectory, JoystickSpring, LineTrajectory, ScriptedOperator
 from .models import OmniRobot, PlanarArm
@@ -186,7 +187,39 @@ def build(data: dict, controller: str | None):
     except (TypeError, ValueError) as exc:
         raise ScenarioError(f"gains/controller: {exc}") from None
     theta0 = _vector(data, "theta_hat0", model.n_theta) if "theta_hat0" in data else np.zeros(model.n_theta)
-    loop = ClosedLoop(model, feasible, operator, machine, params, shape, theta0)
+    loop = ClosedLoop(model, feasible, operator, machine, params, shape, theta0, _backup(data.get("backup", {}), model))
     if not feasible.contains(q0):
         raise ScenarioError("initial.q is outside the feasible set")
     return loop, q0, v0
+
+
+#: `[backup]` keys and defaults: what the controller assumes of the fail-safe stop (lower bounds of the
+#: robot's brakes and friction, the drives' watchdog); the simulated robot's own values are `[robot_sim]`'s
+BACKUP_DEFAULTS = {"hold": 0.1, "brake_torque": 1.0, "friction_coulomb": 0.05, "friction_viscous": 0.01,
+                   "margin": 0.01}
+
+
+def _backup(table, model):
+    """The scenario's BackupModel (sharedctl/backup.py): on by default for the omnidirectional robot,
+    `enabled = false` turns it off; the arm has no brake model and refuses `enabled = true`."""
+    if not isinstance(table, dict):
+        raise ScenarioError("backup must be a table")
+    unknown = set(table) - set(BACKUP_DEFAULTS) - {"enabled"}
+    if unknown:
+        allowed = sorted(BACKUP_DEFAULTS) + ["enabled"]
+        raise ScenarioError(f"unknown key backup.{sorted(unknown)[0]} (allowed: {allowed})")
+    enabled = table.get("enabled", isinstance(model, OmniRobot))
+    if not isinstance(enabled, bool):
+        raise ScenarioError("backup.enabled must be true or false")
+    if not enabled:
+        return None
+    if not isinstance(model, OmniRobot):
+        raise ScenarioError("backup.enabled: only robot.kind = omni3 has a brake model")
+    values = {}
+    for key, default in BACKUP_DEFAULTS.items():
+        value = _number(table, key, default, "backup.")
+        if value < 0 or (key == "brake_torque" and value + _number(table, "friction_coulomb", 0.05, "backup.") <= 0):
+            raise ScenarioError(f"backup.{key} must be >= 0 (and brake_torque + friction_coulomb > 0)")
+        values[key] = value
+    return omni_backup(model.parameters, values["brake_torque"], values["friction_coulomb"],
+                       values["friction_viscous"], values["hold"], values["margin"])

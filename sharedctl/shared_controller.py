@@ -12,11 +12,13 @@ same code.
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from functools import cached_property
 
 import numpy as np
 
+from .backup import BackupModel, govern, speed_aware_rows
 from .constraints import FeasibleSet
 from .models import EulerLagrangeModel
 from .reference import ReferenceShape
@@ -44,6 +46,7 @@ class ControllerState:
     law_role: LawRole | None = None      # which law's state `law_state` holds (None: none engaged)
     law_state: np.ndarray = field(default_factory=lambda: np.zeros(0))
     observer: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    sent: tuple = ()       # the last commands u_s, oldest first (the predictor's input history)
 
 
 @dataclass(frozen=True)
@@ -70,6 +73,8 @@ class StepOutput:
     theta_estimate: np.ndarray
     v_used: np.ndarray       # q̇ (state feedback) or the observer's v̂ (output feedback)
     region_margins: np.ndarray
+    backup_share: float = 0.0          # λ of backup.govern: 0 = u_s as sharing gave it, 1 = the fallback
+    backup_margin: float = math.nan    # the state's backup margin (m); NaN without a backup model
 
     @cached_property
     def q_r(self) -> np.ndarray:
@@ -89,6 +94,7 @@ class SharedController:
     machine: MachineController
     sharing: SharingParameters = field(default_factory=SharingParameters)
     reference: ReferenceShape = field(default_factory=ReferenceShape)
+    backup: BackupModel | None = None      # the fail-safe stop the commands are kept safe for (backup.py)
 
     def initial_state(self, q0: np.ndarray, theta_hat0: np.ndarray | None = None) -> ControllerState:
         machine_mode = self.sharing.mode is Mode.MACHINE
@@ -97,8 +103,15 @@ class SharedController:
         observer = self.machine.observer.initial_state(np.asarray(q0, float)) if self.machine.observer else np.zeros(0)
         return ControllerState(arbiter, theta.copy(), None, np.zeros(0), observer)
 
-    def step(self, state: ControllerState, q: np.ndarray, v: np.ndarray | None, operator: OperatorInput, dt: float):
+    def step(self, state: ControllerState, q: np.ndarray, v: np.ndarray | None, operator: OperatorInput, dt: float,
+             delay: float = 0.0):
         """One sample: returns (next state, output). `v` may be None for output feedback.
+
+        `delay` (s): how old (q, q̇) will be when the command computed now acts — the feedback's
+        age plus the command's transit, as measured. With state feedback the step then runs on the
+        state predicted for that instant (`predict`: the model driven by the commands this
+        controller sent meanwhile), so its barrier acts on where the robot will be, not where it
+        was (predictor feedback, docs/control.md §10).
 
         The hot path of the daemon (docs/performance.md): per-step constants are cached where
         they are built (stacked rows, gain vectors, parameter box); the per-sample arithmetic —
@@ -110,17 +123,25 @@ class SharedController:
         """
         model, feasible, machine = self.model, self.feasible, self.machine
         observer = machine.observer
+        lag = int(round(delay / dt)) if delay > 0.0 else 0
+        if lag and observer is None and state.sent:
+            q, v = predict(model, q, v, state.sent[-lag:], dt)
         v_used = observer.velocity(q, state.observer) if observer else np.asarray(v, float)
         mode = self.sharing.mode
         intent = 0.0 if mode is Mode.MACHINE else operator.intent
         q_list, v_list = floats(q), v_used.tolist()
         rows = feasible.row_values(q_list, v_list)
+        backup = self.backup
+        class_rows = rows
+        if backup is not None:
+            held = model.acceleration(q, v_used, operator.force) if mode is not Mode.MACHINE else None
+            class_rows = speed_aware_rows(backup, feasible, rows, v_used, self.sharing.bands.b2, held)
         every_group = _EveryGroupOnDemand(feasible, np.array(q_list), np.array(v_list), operator.desired,
                                           self.reference, machine.tracking.lam)
         arbiter, decision = arbitrate(feasible, self.sharing, state.arbiter, q, v_used, intent, dt,
-                                      every_group.lyapunov, every_group, rows,
+                                      every_group.lyapunov, every_group, class_rows,
                                       push_turned_away(feasible, q_list, operator.desired.q, operator.force,
-                                                       self.reference.epsilon, self.sharing.bands))
+                                                       self.reference.epsilon, self.sharing.bands, class_rows[0]))
 
         theta_hat, law_role, law_state = state.theta_hat, state.law_role, state.law_state
         engaged = decision.authority is not Authority.HUMAN and decision.group is not None
@@ -161,6 +182,12 @@ class SharedController:
             else:
                 u_f = self.recovery_force(grp, q, v_used)
         u_s = shared_input(decision, u_h, u_f)
+        backup_share, backup_margin = 0.0, math.nan
+        if backup is not None and decision.authority is not Authority.HUMAN:
+            governed = govern(backup, model, feasible, q, v_used, u_s, dt)
+            u_s, backup_share, backup_margin = governed.u, governed.share, governed.margin
+            if backup_share > 0.0:
+                theta_next = theta_hat      # the law's update assumes u_f acts; it did not
         if out is not None and law_state.size:
             law_next = law_state + dt * law.with_applied_input(out.state_dot, u_s)   # filters see the applied u_s
 
@@ -171,8 +198,10 @@ class SharedController:
             u_s=u_s, u_h=u_h, u_f=u_f, authority=decision.authority, set_class=decision.situation.overall,
             group=decision.group, role=decision.role, k_h=decision.k_h, k_f=decision.k_f, reference=reference,
             theta_estimate=estimate, v_used=v_used, region_margins=feasible.region_margins(q, rows[0]),
+            backup_share=backup_share, backup_margin=backup_margin,
         )
-        next_state = ControllerState(arbiter, theta_next, law_role, law_next, observer_next)   # every field
+        sent = (state.sent + (u_s,))[-HISTORY:]
+        next_state = ControllerState(arbiter, theta_next, law_role, law_next, observer_next, sent)   # every field
         if not (all_finite(u_s.tolist()) and all_finite(theta_next.tolist()) and all_finite(law_next.tolist())):
             raise NonFiniteCommand("the shared controller produced a non-finite value")
         return next_state, output
@@ -188,6 +217,25 @@ class SharedController:
         no value (z = ln(x/x_r) needs x < 0): brake, and push back along the faces crossed."""
         excess = np.maximum(group.values(q) + self.reference.epsilon, 0.0)
         return -self.recovery_damping * v - self.recovery_stiffness * (group.K.T @ excess)
+
+
+#: commands kept for the predictor: 64 periods (128 ms at 500 Hz) — more than any delay inside the envelope
+HISTORY = 64
+
+
+def predict(model, q, v, commands, dt: float):
+    """(q, q̇) after the commands (oldest first), each held dt: per period the model's acceleration
+    at its start, held (q += q̇ dt + ½a dt², q̇ += a dt) — one evaluation per period, so that a
+    15 ms delay costs a few tens of µs. The plant's friction, its true parameters and this
+    first-order step differ from the truth; the error over a delay L grows like L² times the force
+    error over the mass, a margin docs/control.md §10 sizes."""
+    q, v = np.asarray(q, float), np.asarray(v, float)
+    half = 0.5 * dt * dt
+    for u in commands:
+        a = model.acceleration(q, v, u)
+        q = q + dt * v + half * a
+        v = v + dt * a
+    return q, v
 
 
 _EMPTY = np.zeros(0)

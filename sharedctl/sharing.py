@@ -246,16 +246,19 @@ def wish_admissible(feasible: FeasibleSet, q_d, epsilon: float) -> bool:
     return feasible.margin(np.asarray(q_d, dtype=float)) >= epsilon
 
 
-def push_turned_away(feasible: FeasibleSet, q, q_d, u_h, epsilon: float, bands: Bands) -> bool:
+def push_turned_away(feasible: FeasibleSet, q, q_d, u_h, epsilon: float, bands: Bands, values=None) -> bool:
     """Has the operator's push turned away from the faces? The wish is admissible (wish_admissible) and,
     in some polytope that contains q, u_h has no component towards a face the robot is within the
     standoff band of (k_j u_h ≤ 0 for every row with −b_s < k_j q + t_j < 0): both the wish and the
     hand say "back in". (As for the sets, a union asks for one polytope: pushing at a face of one
-    polytope that lies inside another is not pushing out of Q_a.)"""
+    polytope that lies inside another is not pushing out of Q_a.) `values`: the row values to judge
+    "within the standoff band" by, if not K q + T — the rows seen through the fail-safe stop
+    (backup.speed_aware_rows), so that a push still counts while its stop would end in the band."""
     if not wish_admissible(feasible, q_d, epsilon):
         return False
     standoff = bands.standoff
-    values, pushes = feasible.row_values(q, u_h)
+    own_values, pushes = feasible.row_values(q, u_h)
+    values = own_values if values is None else values
     for first, end in feasible.row_spans:
         x = values[first:end]
         if all(xj < 0.0 for xj in x) and not any(

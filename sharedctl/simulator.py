@@ -20,6 +20,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .backup import BackupModel, govern, speed_aware_rows
 from .constraints import FeasibleSet
 from .controllers import (
     CertaintyEquivalentLaw,
@@ -113,6 +114,7 @@ class ClosedLoop:
     sharing: SharingParameters = field(default_factory=SharingParameters)
     reference: ReferenceShape = field(default_factory=ReferenceShape)
     theta_hat0: np.ndarray | None = None
+    backup: BackupModel | None = None     # the fail-safe stop the commands are kept safe for (backup.py)
 
 
 @dataclass
@@ -203,6 +205,15 @@ def simulate(loop: ClosedLoop, q0, v0, duration: float, dt: float) -> Trace:
 
     zero_n, zero_theta = np.zeros(n), np.zeros(n_theta)
     no_law_rate = {}
+    backup = loop.backup
+
+    def class_rows(q_, v_, u_h):
+        """Definition 2's rows, seen through the fail-safe stop with the operator's command held,
+        when the loop has a backup model."""
+        if backup is None:
+            return None
+        held = model.acceleration(q_, v_, u_h) if loop.sharing.mode is not Mode.MACHINE else None
+        return speed_aware_rows(backup, feasible, feasible.row_values(q_, v_), v_, loop.sharing.bands.b2, held)
 
     def rates(t, q_, v_, th_, s_, o_, decision, want_signals=False):
         desired = human.desired(t)
@@ -226,6 +237,10 @@ def simulate(loop: ClosedLoop, q0, v0, duration: float, dt: float) -> Trace:
             if decision.authority is Authority.MACHINE:
                 th_dot = out.theta_dot
         u_s = shared_input(decision, u_h, u_f)
+        if backup is not None and decision.authority is not Authority.HUMAN:
+            governed = govern(backup, model, feasible, q_, v_meas, u_s, dt)
+            if governed.share > 0.0:
+                u_s, th_dot = governed.u, zero_theta       # the law's update assumes u_f acts; it did not
         if engaged:
             s_dot = law.with_applied_input(s_dot, u_s)
         acc = model.acceleration(q_, v_, u_s)
@@ -245,10 +260,11 @@ def simulate(loop: ClosedLoop, q0, v0, duration: float, dt: float) -> Trace:
         q_r_all, values = all_groups(feasible.stack, q, v_meas, desired, loop.reference, ctrl.tracking.lam)
         ref_ok = feasible.reference_inside(q_r_all)
         wish_inside = wish_admissible(feasible, desired.q, loop.reference.epsilon)
+        seen = class_rows(q, v_meas, command.force)
         push_away = wish_inside and push_turned_away(feasible, q, desired.q, command.force, loop.reference.epsilon,
-                                                     loop.sharing.bands)
+                                                     loop.sharing.bands, None if seen is None else seen[0])
         arbiter, decision = arbitrate(feasible, loop.sharing, arbiter, q, v_meas, intent, dt,
-                                      values.__getitem__, ref_ok, push_away=push_away)
+                                      values.__getitem__, ref_ok, seen, push_away=push_away)
         engaged = decision.authority is not Authority.HUMAN and decision.group is not None
         if engaged and (not engaged_before or decision.group_changed or ctrl.law(decision.role) is not law):
             if law is not None and law_state.size:
@@ -281,7 +297,7 @@ def simulate(loop: ClosedLoop, q0, v0, duration: float, dt: float) -> Trace:
             k_h=decision.k_h, k_f=decision.k_f, intent=intent, margin=feasible.margin(q),
             inside=feasible.contains(q),
             true_class=int(decision.situation.overall if observer is None
-                           else classify(feasible, q, v, loop.sharing.bands).overall),
+                           else classify(feasible, q, v, loop.sharing.bands, class_rows(q, v, command.force)).overall),
             own_law=engaged and ctrl.owns(law), wish_inside=wish_inside,
         )
 

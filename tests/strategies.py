@@ -22,6 +22,7 @@ from importlib import resources
 import numpy as np
 from hypothesis import HealthCheck, Phase
 from hypothesis import strategies as st
+from scipy import integrate
 from scipy.optimize import linprog
 
 from sharedctl.constraints import FeasibleSet, Polytope
@@ -119,17 +120,18 @@ def paper_data(name: str) -> dict:
 # (convex) and t ≈ 8.9 s (non-convex): their first 8 s never leave the safe set. The
 # shortened variants keep every key of the file (set, q0, operator, gains) and only start
 # the file's desired line later, at its position at t = PAPER_SHIFT — the same line, entered
-# later — and run PAPER_DURATION (5 s convex, 10 s non-convex):
+# later — and run PAPER_DURATION (5 s convex, 17 s non-convex):
 # * convex, shift 9.5 s: first machine take-over at ≈ 1.4 s on the face x = −1, the slide
 #   along it and take-overs on y = 4 from ≈ 3 s, next to the corner x = −1, y = 4;
 # * non-convex, shift 16 s (the line start (0.7, 0.6) is inside the obstacle, so the operator
-#   pulls the robot from (−0.9, 3) straight at the face x = 0 at up to ≈ 1.8 m/s): take-over
-#   at ≈ 1.1 s, the machine slides the robot down the face with the projected wish while the
-#   wish is in the obstacle, hands it back once the wish is below y = −ε and the push has turned
-#   away (≈ 8 s: along the face the law follows the wish at its own pace), and the operator
-#   rounds the obstacle corner (0, 0) from {x ≤ 0} into {y ≤ 0}.
+#   pulls the robot from (−0.9, 3) straight at the face x = 0 at up to ≈ 2 m/s): the fail-safe
+#   stop from that speed would end in the obstacle, so the machine takes over early (≈ 0.9 s,
+#   0.8 m from the face), slides the robot down the face with the projected wish while the wish
+#   is in the obstacle (along the face the law follows the wish at its own pace), hands it back
+#   once the wish is below y = −ε and the push has turned away, and the operator rounds the
+#   obstacle corner (0, 0) from {x ≤ 0} into {y ≤ 0} (≈ 16 s).
 PAPER_SHIFT = {"paper_convex": 9.5, "paper_nonconvex": 16.0}
-PAPER_DURATION = {"paper_convex": 5.0, "paper_nonconvex": 10.0}
+PAPER_DURATION = {"paper_convex": 5.0, "paper_nonconvex": 17.0}
 
 
 def paper_short_data(name: str) -> dict:
@@ -622,16 +624,46 @@ def transparency_failures(trace: Trace) -> list[str]:
     return []
 
 
-def takeover_margin_failures(trace: Trace, params: SharingParameters) -> list[str]:
-    """Every take-over within b1 of the border: trace.margin ≤ b1 at each take-over sample.
+def braking_distance(block, speed: float) -> float:
+    """The path from `speed` to rest at deceleration a_c + k·speed, integrated numerically
+    (dx = −v dv / (a_c + k v)): the oracle for BrakeBlock.distance's closed form."""
+    if speed <= 0.0:
+        return 0.0
+    return integrate.quad(lambda u: u / (block.coulomb + block.viscous * u), 0.0, speed)[0]
+
+
+def stop_reach_bound(backup, v, a=None) -> float:
+    """An upper bound of how far any unit-norm row can advance in the fail-safe stop from velocity
+    v with the acceleration a held T_w (default: none): per brake block, |v_b| T_w + ½|a_b| T_w²
+    (the hold) plus the braking path from |v_b| + |a_b| T_w (numerically integrated, plus the
+    block's creep) — path lengths, whatever the direction."""
+    if backup is None:
+        return 0.0
+    v = np.asarray(v, float)
+    a = np.zeros_like(v) if a is None else np.asarray(a, float)
+    T, total = backup.hold, 0.0
+    for b in backup.blocks:
+        speed, accel = float(np.linalg.norm(v[list(b.axes)])), float(np.linalg.norm(a[list(b.axes)]))
+        top = speed + accel * T
+        total += speed * T + 0.5 * accel * T * T + braking_distance(b, top) + (b.creep if top > 0.0 else 0.0)
+    return total
+
+
+def takeover_margin_failures(trace: Trace, params: SharingParameters, backup=None, model=None) -> list[str]:
+    """Every take-over within b1 of the border — b1 plus the fail-safe stop's reach at that
+    sample's velocity (the controller's: v̂ in output feedback) with the operator's command held
+    when the loop has a backup model (and `model` to turn u_h into an acceleration):
+    trace.margin ≤ b1 + reach at each take-over sample.
 
     Geometry, not the arbiter's classification: a take-over needs a hazardous state, i.e. a row
-    with −b1 ≤ x_j < 0 in every polytope that contains q (or none contains q), so the best
-    region's slack (FeasibleSet.margin, from the rows alone) is at most b1 there."""
+    with −b1 ≤ x_j + reach_j < 0 in every polytope that contains q (or none contains q), so the
+    best region's slack (FeasibleSet.margin, from the rows alone) is at most b1 + reach there."""
     b1 = params.bands.b1
     for k in takeover_samples(trace):
-        if not trace.margin[k] <= b1:
-            return [f"take-over at t={trace.t[k]:.3f} with margin {trace.margin[k]:.4g} > b1 = {b1}"]
+        held = model.acceleration(trace.q[k], trace.v_hat[k], trace.u_h[k]) if backup is not None else None
+        limit = b1 + stop_reach_bound(backup, trace.v_hat[k], held)
+        if not trace.margin[k] <= limit + 1e-12:
+            return [f"take-over at t={trace.t[k]:.3f} with margin {trace.margin[k]:.4g} > b1 + reach = {limit:.4g}"]
     return []
 
 
@@ -648,11 +680,11 @@ def dwell_failures(trace: Trace, params: SharingParameters, dt: float) -> list[s
     return []
 
 
-def sharing_failures(trace: Trace, params: SharingParameters, dt: float) -> list[str]:
+def sharing_failures(trace: Trace, params: SharingParameters, dt: float, backup=None, model=None) -> list[str]:
     """The closed-loop sharing properties that need no classification of the state (see the
     functions above); the decisions per set class are tested on hand-classified states in
     tests/test_sharing_properties.py."""
-    return (transparency_failures(trace) + takeover_margin_failures(trace, params)
+    return (transparency_failures(trace) + takeover_margin_failures(trace, params, backup, model)
             + dwell_failures(trace, params, dt))
 
 

@@ -5,6 +5,7 @@ Stated tolerance (docs/performance.md, "Batched simulator"): for every robot, th
 and set class identical at every sample; the same authority and group switch counts; the
 summary (metrics.summarize) equal to the same tolerances. Durations are short (0.5–1 s at 2 ms).
 """
+import dataclasses
 import tomllib
 from importlib import resources
 
@@ -88,8 +89,10 @@ def test_batch_equals_scalar_runs_with_the_tracking_laws_engaged(controller):
     _assert_same([loop] * 3, starts, speeds, duration=0.6)
 
 
-def test_robots_may_differ_in_operator_and_estimate():
-    """The scenario's operator, a scripted one with other gains and wish, an adversary, and three θ̂(0), in one batch."""
+@pytest.mark.parametrize("backup", [True, False], ids=["backup", "no_backup"])
+def test_robots_may_differ_in_operator_and_estimate(backup):
+    """The scenario's operator, a scripted one with other gains and wish, an adversary, and three θ̂(0), in one batch;
+    with the scenario's backup model (the governor on) and without one."""
     base, q0, _ = _scenario("paper_convex").closed_loop("ce")
     kp = np.full(3, 20.0)
     humans = [
@@ -99,7 +102,8 @@ def test_robots_may_differ_in_operator_and_estimate():
         AdversarialOperator(LineTrajectory(np.array([-2.0, 2.0, 0.0]), np.zeros(3)), kp, np.array([-2.0, 2.0, 0.0]),
                             0.5),
     ]
-    loops = [ClosedLoop(base.model, base.feasible, h, base.controller, base.sharing, base.reference, th)
+    loops = [ClosedLoop(base.model, base.feasible, h, base.controller, base.sharing, base.reference, th,
+                        base.backup if backup else None)
              for h, th in zip(humans, ([0.0, 0.0, 0.0], [10.0, 1.0, 5.0], [20.0, 2.0, 8.0]))]
     starts = np.array([[-0.5, 3.5, 0.0], [-0.5, 3.0, 0.0], [-0.6, 2.0, 0.0]])
     _assert_same(loops, starts, np.zeros((3, 3)))
@@ -135,6 +139,6 @@ def test_random_batch_stays_inside():
     assert (result.human_authority < 1.0).sum() > N // 4, "most robots should meet the wall within 1 s"
     # the same robots, one by one, agree with the batch (a sample of them)
     for i in rng.choice(N, 3, replace=False):
-        one = ClosedLoop(loop.model, loop.feasible, humans[i], loop.controller, loop.sharing, loop.reference)
+        one = dataclasses.replace(loop, human=humans[i])      # the scenario's loop (its backup model too)
         expected = summarize(simulate(one, q0[i], v0[i], 1.0, DT), DT)
         _assert_same_summary(result.summary(i), expected)

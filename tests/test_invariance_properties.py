@@ -151,7 +151,14 @@ def test_fast_approach_into_a_corner_is_stopped(speed):
     assert_invariant(case, "ce")
 
 
-@pytest.mark.parametrize("speed,controller", [(sp, c) for sp in (3.0, 8.0) for c in S.CONTROLLERS])
+#: of at 8 m/s is not in the list: its observer starts from rest (v̂(0) = 0), so for the first periods
+#: the law brakes for a robot 4–8 m/s slower than the true one — an observer error beyond the
+#: configuration's stated bound (ṽ_max = 3 m/s, docs/control.md §4.3) — and the stop would need
+#: some 50 kN within 8 mm, twenty times the drives' limit: outside every envelope this project states.
+HAZARD_STARTS = [(sp, c) for sp in (3.0, 8.0) for c in S.CONTROLLERS if (sp, c) != (8.0, "of")]
+
+
+@pytest.mark.parametrize("speed,controller", HAZARD_STARTS)
 def test_start_inside_the_hazard_band_at_speed_is_stopped(speed, controller):
     """0.1 m from the face x = 0, moving into it at 3 or 8 m/s at t = 0 (hazardous from the
     first sample — for of only in truth: its observer starts from rest, v̂(0) = 0, so its
@@ -179,11 +186,15 @@ def test_slow_approach_is_first_caught_at_a_distance_proportional_to_its_speed(d
     (8.7 mm at 0.1 m/s, 2.7 mm at 0.03 m/s, 0.27 mm at 3 mm/s), where every law's forces are
     enormous (at 3 mm/s the CE law answered 2·10⁴ N and threw the robot out). The inner band
     b0 = 25 mm makes any approach closer than b0 hazardous, so the machine takes over at
-    max(s·b1²/(1 + s·b1), b0)."""
+    max(s·b1²/(1 + s·b1), b0). Seen through the fail-safe stop (docs/control.md §10), every row is
+    moved towards its face by the stop's reach at the approach speed, s·T_w plus the braking path
+    from s (straight at the face, the whole path counts): the take-over comes that much earlier."""
     case = S.creep_case(distance, speed)
     trace = S.run(case, "ce")
     first = S.takeover_samples(trace)[0]
-    expected = min(distance, S.first_takeover_distance(speed))   # (0.005, 0.003) starts inside b0
+    reach = S.stop_reach_bound(case.loop("ce").backup, case.v0)
+    expected = min(distance, S.first_takeover_distance(speed) + reach)   # (0.005, 0.003) starts inside b0
+    assert reach > 0.0
     assert trace.margin[first] == pytest.approx(expected, rel=0.05, abs=speed * S.DT)
 
 

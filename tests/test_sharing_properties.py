@@ -298,7 +298,8 @@ def test_the_operator_weight_restarts_from_zero_after_a_new_hazard():
 def test_paper_runs_take_over_only_within_b1_of_the_border(name, controller):
     case, trace = paper_run(name, controller)
     assert S.takeover_samples(trace).size > 0
-    assert S.takeover_margin_failures(trace, case.sharing) == []
+    loop = case.loop(controller)
+    assert S.takeover_margin_failures(trace, case.sharing, loop.backup, loop.model) == []
 
 
 @pytest.mark.parametrize("name,controller", PAPER_RUNS)
@@ -330,7 +331,9 @@ def test_interventions_are_bounded_by_the_minimum_dwell(name, controller):
 @given(case=st.one_of(S.convex_cases, S.union_cases, S.adversarial_cases), controller=S.controllers)
 def test_sharing_properties_hold_on_random_sets(case, controller):
     trace = S.run(case, controller)
-    assert S.sharing_failures(trace, case.sharing, S.DT) == [], S.describe(case, controller, trace)
+    loop = case.loop(controller)
+    assert S.sharing_failures(trace, case.sharing, S.DT, loop.backup, loop.model) == [], \
+        S.describe(case, controller, trace)
 
 
 # ----- no chattering ---------------------------------------------------------------------------

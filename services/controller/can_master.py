@@ -8,6 +8,10 @@
 * Monitoring: Heartbeat state and error bits per axis (error changes → events), encoder
   estimates per axis (for odometry and the feedback age).
 * Commands: Set_Input_Torque per axis, Estop to all axes, IDLE to all axes.
+* Round trip: `probe_round_trip()`, called by the loop once a period, polls one axis at a time for
+  Get_Bus_Voltage_Current (RTR) at `probe_rate`, and the reply's arrival gives the CAN round trip
+  (round_trip.py: the largest of the last 20; `round_trip`, NaN until measured). One frame out and
+  one back per probe (10 Hz by default); sending one never waits for its reply.
 * Receive path: the frames this side sends (Set_*, Estop, Clear_Errors, RTR polls) come back
   on udp_multicast and are ignored; a frame the codec refuses is counted and skipped.
 * Frames go through a transport (services/can_transport/): on udp_multicast a socket of its own
@@ -38,7 +42,9 @@ from sharedctl.protocol.odrive_enums import AxisState, ControlMode, InputMode, O
 from ..can_transport import transport_for
 from .encoder_check import EncoderCheck
 from .odometry import AxisEstimate
+from .round_trip import DEFAULT_RATE, PROBE_COMMAND, RoundTripProbe
 
+PROBE_REPLY = cs.CLASS_BY_CMD[int(PROBE_COMMAND)]   # the Get_* frame a round-trip poll is answered with
 ESTIMATE_INTERVALS = 9   # intervals between one axis's encoder frames kept for `estimate_interval`
 HOST_FRAMES = (
     cs.Estop, cs.SetAxisState, cs.SetControllerMode, cs.SetInputVel, cs.SetInputTorque, cs.SetLimits,
@@ -88,9 +94,11 @@ class CanMaster:
     arm_requested_at: float | None = None
     events: list = field(default_factory=list)
     fast_paths: bool = True                      # the per-period frames through cansimple's entry points
+    probe_rate: float = DEFAULT_RATE             # Hz, round-trip polls (0: none)
 
     def __post_init__(self) -> None:
         self.axes = {n: AxisStatus(n) for n in self.nodes}
+        self.probe = RoundTripProbe(tuple(self.nodes), self.probe_rate)
         self.transport = transport_for(self.bus)
         self._node_ids = frozenset(self.nodes)
 
@@ -156,6 +164,23 @@ class CanMaster:
             return
         for n, tau in zip(self.nodes, torques):
             self._send_frame(*cs.torque_frame(n, float(tau)))
+
+    def probe_round_trip(self) -> bool:
+        """The round-trip poll that is due, if one is (round_trip.py); True if one was sent. Non-blocking: the
+        reply is read by `receive_until` like any frame."""
+        node = self.probe.due(self.clock())
+        if node is None:
+            return False
+        at = self.clock()
+        if not self.send(cs.PollRequest(node, PROBE_COMMAND)):
+            return False                   # counted in `tx_errors`; the next probe is due a probe period later
+        self.probe.probe_sent(node, at)
+        return True
+
+    @property
+    def round_trip(self) -> float:
+        """s, the CAN round trip estimate (round_trip.py); NaN until a probe has been answered."""
+        return self.probe.round_trip
 
     def estop_all(self) -> None:
         for n in self.nodes:
@@ -227,6 +252,8 @@ class CanMaster:
             self._encoder(axis, frame.pos_estimate, frame.vel_estimate, now)
         elif isinstance(frame, cs.Heartbeat):
             self._heartbeat(axis, frame, now)
+        elif type(frame) is PROBE_REPLY:
+            self.probe.reply(frame.node_id, now)
 
     def _encoder(self, axis: AxisStatus, pos: float, vel: float, now: float) -> None:
         if axis.estimate_frame_at is not None and now > axis.estimate_frame_at:

@@ -6,7 +6,7 @@
                          [--rate 500] [--telemetry-rate 50] [--torque-limit 60] [--duration S]
                          [--feedback-timeout-ms 50] [--priority realtime|high|normal] [--quiet]
                          [--[no-]sensor-sync] [--sensor-lead-us 250] [--sensor-wait-us T/4] [--spin-us 100]
-                         [--torque-at-us 0] [--cpu N]
+                         [--torque-at-us 0] [--cpu N] [--[no-]predict] [--rtt-probe-rate 10]
                          [--lease implicit|explicit] [--lease-expiry-ms 1000] [--max-command-age-ms 500]
                          [--max-clock-skew-ms MS] [--json OUT]
 
@@ -29,11 +29,14 @@ from ..lifecycle import StopFlag
 from ..service_config import add_argument as add_service_config_argument
 from ..scenario_files import load
 from ..summary_output import write_json
-from .daemon import ControllerDaemon
+from .daemon import MAX_DELAY, ControllerDaemon
 from .daemon_config import DaemonConfig
 from . import loop_stats
 from .priority import LEVELS, keep_off_cpu, make_loop_realtime, pin_to_cpu, raise_nice
+from .round_trip import DEFAULT_RATE
 from ..recording.launch import add_argument as add_record_argument, open_process_recording, summary_line
+
+MAX_PROBE_RATE = 50.0   # Hz: round-trip polls are a few frames a second, never a load on the bus
 
 PROG = "sharedctl controller"
 
@@ -77,6 +80,15 @@ def add_parser(subparsers) -> None:
                         "computing then (time-triggered output: the same actuation delay every period; 0, the "
                         "default: as soon as computed — delay costs the shared controller margin on a loaded host; "
                         "the hold polls the clock, never sleeps)")
+    p.add_argument("--predict", action=argparse.BooleanOptionalAction, default=True,
+                   help="run each control step on the state predicted for when its torques act: the oldest wheel "
+                        "estimate's age + the measured CAN round trip (+ the --torque-at-us hold), at most "
+                        f"{MAX_DELAY * 1e3:g} ms and 64 periods (default; docs/control.md §10); --no-predict: on the "
+                        "state as read")
+    p.add_argument("--rtt-probe-rate", type=float, default=DEFAULT_RATE, metavar="HZ",
+                   help="poll one drive at a time for Get_Bus_Voltage_Current (RTR) this often to measure the CAN "
+                        f"round trip (default {DEFAULT_RATE:g}; one frame out and one back per poll; at most "
+                        f"{MAX_PROBE_RATE:g}; 0: none, and the round trip counts as 0)")
     p.add_argument("--cpu", type=int, metavar="N",
                    help="run the loop thread on CPU N alone and keep the process's other threads (Zenoh, CAN) off it "
                         "(default: no pinning; docs/performance.md)")
@@ -111,6 +123,8 @@ def run(args) -> int:
         if not all(0.0 <= value < 1e6 / args.rate for value in (args.spin_us, args.sensor_lead_us, args.torque_at_us)):
             raise ValueError("--spin-us, --sensor-lead-us and --torque-at-us must be ≥ 0 and shorter than the "
                              "control period")
+        if not 0.0 <= args.rtt_probe_rate <= MAX_PROBE_RATE:
+            raise ValueError(f"--rtt-probe-rate must be between 0 (no polls) and {MAX_PROBE_RATE:g} Hz")
         if args.sensor_wait_us is None:
             args.sensor_wait_us = 0.25e6 / args.rate
         if not 0.0 <= args.sensor_wait_us < 0.5e6 / args.rate:
@@ -135,6 +149,7 @@ def run(args) -> int:
         realtime=args.priority == "realtime", sensor_sync=args.sensor_sync, sensor_lead=args.sensor_lead_us / 1e6,
         sensor_wait=args.sensor_wait_us / 1e6,
         spin=args.spin_us / 1e6, torque_at=args.torque_at_us / 1e6,
+        predict=args.predict, rtt_probe_rate=args.rtt_probe_rate,
         lease_mode=args.lease, lease_expiry=args.lease_expiry_ms / 1e3,
         max_command_age=args.max_command_age_ms / 1e3,
         max_clock_skew=None if args.max_clock_skew_ms is None else args.max_clock_skew_ms / 1e3,

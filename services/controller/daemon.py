@@ -3,7 +3,8 @@
 Every control period (500 Hz by default, `RateClock`) a tick reads (1, 2), steps (3, 4) and writes (5):
   1. latest wheel encoder estimates → odometry (q, q̇)                    (odometry.py)
   2. latest operator command → OperatorInput, with the staleness policy   (operator_input.py)
-  3. the mode logic; `SharedController.step(state, q, q̇ or None, operator, dt)` (sharedctl; None for `of`)
+  3. the mode logic; `SharedController.step(state, q, q̇ or None, operator, dt, delay)` (sharedctl; None for
+     `of`), `delay` the age (q, q̇) will have when the torques act (`prediction_delay`; 0 with --no-predict)
   4. τ = B(ψ)⁻¹ u_s (`OmniRobot.wheel_map`, in closed form), scaled down
      uniformly so that max|τ_j| ≤ the torque limit (the direction of u_s is kept)
   5. Set_Input_Torque to every axis as soon as computed (can_master.py), then the period's telemetry
@@ -19,7 +20,9 @@ callback thread, so none can hold the GIL when the loop wakes); with `torque_at`
 frames are held until that long after its deadline (time-triggered output: the hold polls the clock,
 never sleeps; off by default, docs/performance.md); a warm-up step runs and
 `gc.freeze()` is called, the first Heartbeat sent and the CAN frames queued since the bus opened are
-read before the clock starts (they cost the first period 0.3–0.7 ms otherwise). RobotState goes out at the telemetry
+read before the clock starts (they cost the first period 0.3–0.7 ms otherwise). After each tick the CAN
+round-trip poll that is due goes out (can_master.py, round_trip.py: `--rtt-probe-rate`, 10 Hz by
+default; its reply is read with the other frames). RobotState goes out at the telemetry
 rate on the clock (captured, built and sent in three consecutive periods: telemetry_schedule.py),
 events when something changes (rate-limited), a Heartbeat message at 1 Hz and a liveliness token for
 as long as the daemon runs. The loop's statistics are an observer beside it (loop_stats.py), notified
@@ -49,7 +52,7 @@ import numpy as np
 
 from sharedctl.protocol.msgpack_codec import encode_message
 from sharedctl.protocol.wire_types import Dims
-from sharedctl.shared_controller import NonFiniteCommand, SharedController
+from sharedctl.shared_controller import HISTORY, NonFiniteCommand, SharedController
 
 from ..lifecycle import RateClock, poll_until
 from .can_master import CanMaster
@@ -67,6 +70,7 @@ from .zenoh_links import ControllerLinks
 ROLE = "controller"
 RECEIVE_SLICE = 5e-4    # s: the loop takes and judges operator commands at least this often between ticks
 RECEIVE_MARGIN = 2e-4   # s: reading CAN frames stops this long before the clock's final spin (the rest: next tick)
+MAX_DELAY = 0.1         # s: the largest delay predicted over (a longer one is cut to it; see `prediction_delay`)
 
 
 class Mode(enum.Enum):
@@ -84,7 +88,8 @@ class ControllerDaemon:
         self.model = loop.model
         if not hasattr(self.model, "wheel_torques"):
             raise ValueError("the controller daemon drives the omnidirectional robot (robot.kind = omni3)")
-        self.controller = SharedController(loop.model, loop.feasible, loop.controller, loop.sharing, loop.reference)
+        self.controller = SharedController(loop.model, loop.feasible, loop.controller, loop.sharing, loop.reference,
+                                           loop.backup)
         self.output_feedback = loop.controller.observer is not None
         self.state = self.controller.initial_state(q0, loop.theta_hat0)
         self.dims = Dims(dof=self.model.n, n_theta=self.model.n_theta, n_wheels=3)
@@ -94,7 +99,7 @@ class ControllerDaemon:
                                           lease=OperatorLease(config.lease_expiry, config.lease_mode),
                                           guard=ReplayGuard(config.max_command_age, config.max_clock_skew))
         self.lease_guard = ReplayGuard(config.max_command_age, config.max_clock_skew)   # lease queries' own
-        self.master = CanMaster(bus, arm_timeout=config.arm_timeout)
+        self.master = CanMaster(bus, arm_timeout=config.arm_timeout, probe_rate=config.rtt_probe_rate)
         self.session = session
         self.lock = threading.Lock()
         self.links = ControllerLinks(session, config.robot_id, ROLE, self.policy, self.lease_guard, self.lock,
@@ -102,6 +107,8 @@ class ControllerDaemon:
         self.intake, self.apply_commands, self.emit = self.links.intake, self.links.apply_commands, self.links.emit
         self.mode = Mode.ARMING
         self.period = 1.0 / config.rate
+        self.max_delay = min(MAX_DELAY, HISTORY * self.period)   # the predictor keeps HISTORY periods of commands
+        self.delay = 0.0                                         # s, the last `delay` passed to the step
         self.q = np.asarray(q0, float).copy()
         self.v = np.zeros_like(self.q)
         self.out = None
@@ -156,6 +163,7 @@ class ControllerDaemon:
                 self.tick(now)                    # read → step → write: the torque frames
                 self.telemetry.publish_due(now)   # then the RobotState stage and the Heartbeat that are due
                 stats.tick_done(now)
+                self.master.probe_round_trip()    # the round-trip poll, if one is due: one frame, never a wait
                 if self.phase_lock is not None and (arrival := estimates_arrival(self.master.estimates())) is not None:
                     clock.next += self.phase_lock.correction(clock.next, arrival)
                 self.receive_until(clock.next - config.spin - RECEIVE_MARGIN)
@@ -167,6 +175,7 @@ class ControllerDaemon:
             "bad_frames": self.master.bad_frame_count,
             "implausible_estimates": sum(self.master.implausible_estimates.values()),
             "commands_accepted": self.policy.accepted, "rejections": dict(self.policy.rejections),
+            "can_round_trip_ms": self.master.round_trip * 1e3, "rtt_probes": self.master.probe.counts(),
             "mode": self.mode.value})
 
     def warm_up(self) -> None:
@@ -296,9 +305,10 @@ class ControllerDaemon:
         torque, then an estop) on a non-finite command."""
         dt = self.period if self.last_step_at is None else min(max(now - self.last_step_at, 0.0), 4 * self.period)
         self.last_step_at = now
+        self.delay = self.prediction_delay(now) if self.config.predict else 0.0
         try:
             self.state, out = self.controller.step(self.state, self.q, None if self.output_feedback else self.v,
-                                                   operator, dt)
+                                                   operator, dt, self.delay)
             u_s = out.u_s.tolist() if isinstance(out.u_s, np.ndarray) else out.u_s
             tau = self.wheel_map.wheel_torques(self.q, u_s)
             if not all(math.isfinite(t) for t in tau):
@@ -316,6 +326,24 @@ class ControllerDaemon:
         self.out, self.u_s, self.tau = out, out.u_s, np.array(tau)
         self.stats.torques_ready(now)
         return tau
+
+    def prediction_delay(self, now: float) -> float:
+        """How old the (q, q̇) read at `now` will be when this tick's torques act (s), for the step's predictor:
+
+            L = feedback age + CAN round trip + hold,
+
+        the feedback age from the estimates' arrival to `now` (odometry.oldest_feedback_age); the round trip
+        (can_master.py; 0 until measured) for the two legs the arrival times cannot show — the estimates'
+        transit from the drives and the torques' transit to them, with the drives' turnaround — whose sum it
+        measures whichever leg a delay is on; the hold until `torque_at` after the deadline, when the torques
+        are held (`write`). Cut to `max_delay`: MAX_DELAY, or fewer if the controller's command history
+        (HISTORY periods) is shorter; beyond it the prediction has no commands to run on."""
+        round_trip = self.master.round_trip
+        hold = 0.0
+        if self.config.torque_at > 0.0:
+            hold = max((now if self.deadline is None else self.deadline) + self.config.torque_at - now, 0.0)
+        delay = self.feedback_age + (round_trip if math.isfinite(round_trip) else 0.0) + hold
+        return min(delay, self.max_delay)
 
     def estop(self, now: float, reason: str) -> None:
         self.master.estop_all()

@@ -5,6 +5,7 @@ from dataclasses import dataclass
 
 from .lease import DEFAULT_EXPIRY, LeaseMode
 from .replay_guard import DEFAULT_MAX_AGE
+from .round_trip import DEFAULT_RATE
 
 
 @dataclass
@@ -25,6 +26,8 @@ class DaemonConfig:
     sensor_wait: float = 5e-4           # s a synchronised tick waits, at most, for its period's estimates (0: never)
     spin: float = 1e-4                  # s before each deadline polled instead of slept (lifecycle.RateClock)
     torque_at: float = 0.0              # s after its deadline at which a tick sends its torques (0: once computed)
+    predict: bool = True                # the step predicts the state for when its torques act (daemon.prediction_delay)
+    rtt_probe_rate: float = DEFAULT_RATE  # Hz, CAN round-trip polls (round_trip.py; 0: none, the round trip counts 0)
     lease_mode: str = LeaseMode.IMPLICIT  # implicit: a command takes a free lease; explicit: only a take (lease.py)
     lease_expiry: float = DEFAULT_EXPIRY  # s without commands/takes from the holder → lease free
     max_command_age: float = DEFAULT_MAX_AGE  # s later than the session's best delivery → stale (replay_guard.py)

@@ -150,7 +150,7 @@ def plant_reference_run(scenario, controller: str | None, duration: float) -> di
 
     loop, q0, v0 = scenario.closed_loop(controller)
     model, human, feasible = loop.model, loop.human, loop.feasible
-    ctrl = SharedController(model, feasible, loop.controller, loop.sharing, loop.reference)
+    ctrl = SharedController(model, feasible, loop.controller, loop.sharing, loop.reference, loop.backup)
     state = ctrl.initial_state(q0, loop.theta_hat0)
     plant = Plant(model, RobotSimConfig.from_table(scenario.data.get("robot_sim")))
     ps = plant.initial_state(q0, v0)

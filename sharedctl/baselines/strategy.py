@@ -81,7 +81,7 @@ class SharedStrategy(Strategy):
     @staticmethod
     def of(loop: ClosedLoop) -> "SharedStrategy":
         return SharedStrategy(SharedController(loop.model, loop.feasible, loop.controller,
-                                               loop.sharing, loop.reference),
+                                               loop.sharing, loop.reference, loop.backup),
                               loop.theta_hat0)
 
     def initial_state(self, q0, v0):

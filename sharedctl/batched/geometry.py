@@ -249,13 +249,18 @@ class Situation:
     inside: np.ndarray          # (N,) FeasibleSet.contains
 
 
-def classify(table: GroupTable, rows: RowValues, bands: Bands) -> Situation:
-    """Definition 2 per polytope, then the union rule (sets.py)."""
+def classify(table: GroupTable, rows: RowValues, bands: Bands, seen: np.ndarray | None = None) -> Situation:
+    """Definition 2 per polytope, then the union rule (sets.py).
+
+    `seen` (P, N): the row values to classify by, if not rows.x — the rows seen through the
+    fail-safe stop (backup.py's speed_aware_rows, which keeps every row's sign); containment and
+    the margin are those of rows.x."""
     x, x_dot = rows.x, rows.x_dot
+    s = x if seen is None else seen
     negative = x < 0.0
-    near = negative & (x >= -bands.b1)
-    hazard = near & ((x_dot >= allowance(x, bands.b1)) | ((x >= -bands.b0) & (x_dot > 0.0)))
-    unsafe = ((x >= -bands.b2) & (x_dot > allowance(x, bands.b2))) | (x > -bands.standoff)
+    near = (negative if seen is None else s < 0.0) & (s >= -bands.b1)
+    hazard = near & ((x_dot >= allowance(s, bands.b1)) | ((s >= -bands.b0) & (x_dot > 0.0)))
+    unsafe = ((s >= -bands.b2) & (x_dot > allowance(s, bands.b2))) | (s > -bands.standoff)
     containing = (table.region_sel @ ~negative) == 0.0
     any_hazard = (table.region_sel @ hazard) > 0.0
     any_unsafe = (table.region_sel @ unsafe) > 0.0

@@ -1,9 +1,10 @@
 """What a batch run needs: the shared scenario and each robot's own initial state and operator.
 
 Shared by every robot of a batch: the feasible set (its groups), the machine controller and
-its gains, the sharing parameters and the reference shape — one scenario. Per robot: q(0),
-q̇(0), θ̂(0), the true plant parameters θ (the omni robot's mass and inertias may differ) and
-the operator (kind, gains, wish or target). Arrays are component-major, (n, N).
+its gains, the sharing parameters, the reference shape and the backup model of the fail-safe
+stop (backup.py; None: no governor) — one scenario. Per robot: q(0), q̇(0), θ̂(0), the true
+plant parameters θ (the omni robot's mass and inertias may differ) and the operator (kind,
+gains, wish or target). Arrays are component-major, (n, N).
 
 The state of a running batch is one (D, N) array, rows [q, q̇, θ̂, law state, observer]:
 `StateLayout` names the row ranges, so one RK4 combination updates everything at once.
@@ -15,6 +16,7 @@ from typing import Sequence
 
 import numpy as np
 
+from ..backup import BackupModel
 from ..constraints import FeasibleSet
 from ..reference import ReferenceShape
 from ..sharing import SharingParameters
@@ -73,6 +75,7 @@ class BatchProblem:
     theta_hat0: np.ndarray            # (n_θ, N)
     theta: np.ndarray                 # (n_θ, N) true parameters
     operators: OperatorBatch
+    backup: BackupModel | None = None  # the fail-safe stop the commands are kept safe for (ClosedLoop.backup)
 
     @property
     def size(self) -> int:
@@ -82,14 +85,15 @@ class BatchProblem:
         """The robots `index` (slice or index array) of this batch."""
         return BatchProblem(self.model, self.feasible, self.controller, self.sharing, self.reference,
                             self.q0[:, index], self.v0[:, index], self.theta_hat0[:, index], self.theta[:, index],
-                            self.operators.take(index))
+                            self.operators.take(index), self.backup)
 
     @staticmethod
     def from_loops(loops: Sequence[ClosedLoop], q0, v0) -> "BatchProblem":
         """N closed loops (sharing one scenario) and their initial states (N, n) → one batch.
 
         The loops may differ in their human model, θ̂(0) and the plant's parameters; the feasible
-        set, controller gains, sharing parameters and reference shape must be the same.
+        set, controller gains, sharing parameters, reference shape and backup model (or its absence)
+        must be the same (ValueError naming the robot and the field otherwise).
         """
         if not loops:
             raise ValueError("a batch needs at least one robot")
@@ -98,7 +102,7 @@ class BatchProblem:
         for i, loop in enumerate(loops[1:], start=1):
             check_model(loop.model)
             _same_feasible(first.feasible, loop.feasible, i)
-            for name in ("controller", "sharing", "reference"):
+            for name in ("controller", "sharing", "reference", "backup"):
                 if not _same(getattr(first, name), getattr(loop, name)):
                     raise ValueError(f"robot {i}: {name} differs from robot 0 (a batch shares one scenario)")
         n, k = first.model.n, first.model.n_theta
@@ -109,7 +113,7 @@ class BatchProblem:
         theta = np.stack([lp.model.theta for lp in loops], axis=1)
         operators = operators_from_models([lp.human for lp in loops], n)
         return BatchProblem(first.model, first.feasible, first.controller, first.sharing, first.reference,
-                            q0, v0, theta_hat0, theta, operators)
+                            q0, v0, theta_hat0, theta, operators, first.backup)
 
     @staticmethod
     def replicate(loop: ClosedLoop, q0, v0, operators: OperatorBatch | None = None, theta_hat0=None) -> "BatchProblem":
@@ -127,7 +131,8 @@ class BatchProblem:
                       else _columns(theta_hat0, k, N, "theta_hat0"))
         theta = np.repeat(loop.model.theta[:, None], N, axis=1)
         return BatchProblem(loop.model, loop.feasible, loop.controller, loop.sharing, loop.reference,
-                            _columns(q0, n, N, "q0"), _columns(v0, n, N, "v0"), theta_hat0, theta, operators)
+                            _columns(q0, n, N, "q0"), _columns(v0, n, N, "v0"), theta_hat0, theta, operators,
+                            loop.backup)
 
 
 def _columns(rows, n: int, N: int, name: str) -> np.ndarray:

@@ -15,6 +15,7 @@ import numpy as np
 
 from ..controllers import CertaintyEquivalentLaw, CompositeAdaptiveLaw, OutputFeedbackBarrierLaw, OutputFeedbackLaw
 from .arbiter import ArbiterArrays
+from .backup import BackupTable
 from .geometry import GroupTable
 from .laws import CertaintyEquivalent, CompositeAdaptive, Observer, OutputFeedback, OutputFeedbackBarrier
 from .problem import BatchProblem, StateLayout
@@ -71,7 +72,7 @@ def _vector_law(law, n: int, n_theta: int):
 
 
 class Engine:
-    """What every chunk shares: the group table, the vectorised laws, the state layout."""
+    """What every chunk shares: the group table, the vectorised laws, the backup governor, the state layout."""
 
     def __init__(self, problem: BatchProblem, dt: float):
         model, controller = problem.model, problem.controller
@@ -79,6 +80,7 @@ class Engine:
         self.feasible, self.sharing, self.mode = problem.feasible, problem.sharing, problem.sharing.mode
         self.shape, self.lam = problem.reference, controller.tracking.lam
         self.table = GroupTable.of(problem.feasible)
+        self.backup = None if problem.backup is None else BackupTable.of(problem.backup, problem.feasible, self.table)
         tracking = _vector_law(controller.tracking, self.n, self.k)
         hazard = (tracking if controller.hazard is controller.tracking
                   else _vector_law(controller.hazard, self.n, self.k))

@@ -1,11 +1,15 @@
 """One step of simulator.simulate for every robot of a batch.
 
-1. the sharing function is sampled at the start of the step (arbiter.py) and held over it;
-   on a take-over, group or law change the incoming law's filters restart from their
-   published initial conditions ((15), (26), (28)) and θ̂ carries over (θ̂ + β when leaving (13));
+1. the sharing function is sampled at the start of the step (arbiter.py) and held over it —
+   with a backup model, on Definition 2's rows seen through the fail-safe stop (backup.py's
+   speed_aware_rows, the operator's command held); on a take-over, group or law change the
+   incoming law's filters restart from their published initial conditions ((15), (26), (28))
+   and θ̂ carries over (θ̂ + β when leaving (13));
 2. one classical RK4 step of the state [q, q̇, θ̂, law state, observer], the law evaluated at
-   every stage on each robot's own group; θ̂ moves only under full machine authority, and is
-   projected onto the parameter box after the step when the last law projects;
+   every stage on each robot's own group, and u_s, unless the operator has authority, made
+   backup-safe by the governor (backup.py's govern; where it moves u_s, θ̂ holds for that
+   stage); θ̂ moves only under full machine authority, and is projected onto the parameter
+   box after the step when the last law projects;
 3. a robot whose RK stage leaves its active group's polytope (the law has no value there), or
    whose state turns non-finite, stops, with the rows simulator.simulate records for it.
 
@@ -66,11 +70,12 @@ class StepKernel:
             u_h0, intent = ops.command(wish, q, v)
         row_ref, ref_ok, wish_ok = self.reference(wish)
         groups = all_groups(table, q, v_meas, row_ref, e.lam)
-        situation = classify(table, groups.rows, e.sharing.bands)
+        seen = self.seen_rows(fleet, groups.rows.x, v_meas, u_h0)
+        situation = classify(table, groups.rows, e.sharing.bands, seen)
         missed = missed_rows(table, situation)
         chosen = select_group(table, situation, groups.value, missed, ref_ok)
-        push_away = push_turned_away(table, groups.rows.x, u_h0, wish_ok, situation.containing, e.sharing.bands)
-        fleet.arbiter, dec = arbitrate(table, e.sharing, fleet.arbiter, situation, groups.rows.x, missed, chosen,
+        push_away = push_turned_away(table, seen, u_h0, wish_ok, situation.containing, e.sharing.bands)
+        fleet.arbiter, dec = arbitrate(table, e.sharing, fleet.arbiter, situation, seen, missed, chosen,
                                        intent, dt, push_away)
 
         # --- law (re)initialisation, as in simulator.simulate --------------------------------
@@ -105,7 +110,7 @@ class StepKernel:
         d1, u_h, u_f, u_s = self.rates(fleet, Y, wish, plan, 0, dec, machine, escaped, u_h0, record=True)
         stage1 = escaped.copy()
         rows = self.rows(t, fleet, Y, v_meas, wish, groups, chosen, engaged, dec, situation, intent,
-                         (u_h, u_f, u_s), stage1)
+                         (u_h, u_f, u_s), stage1, u_h0)
         fleet.tally.add(rows)
         if recording is not None:
             recording.put(k, fleet.ids, rows)
@@ -222,6 +227,8 @@ class StepKernel:
                 scatter(out[L.theta], sel, theta_dot)
             elif mach.any():
                 scatter(out[L.theta], sel, np.where(mach, theta_dot, 0.0))
+        if e.backup is not None:
+            self.govern(fleet, q, v_meas, u_s, dec, out[L.theta])
         for law, _, sel, _, _ in plan:
             if law.applied_input is not None:                   # a filter of u_s (with_applied_input)
                 rows = slice(L.law_state.start + law.applied_input.start, L.law_state.start + law.applied_input.stop)
@@ -242,7 +249,8 @@ class StepKernel:
                     estimate[:, cols] = law.estimate(theta_hat[:, cols], law_state[: law.state_size, cols])
         return estimate
 
-    def rows(self, t, fleet, Y, v_meas, wish, groups, chosen, engaged, dec, situation, intent, signals, escaped):
+    def rows(self, t, fleet, Y, v_meas, wish, groups, chosen, engaged, dec, situation, intent, signals, escaped,
+             u_h0):
         """The simulator's recorded sample at the start of the step (partial where the first stage escaped)."""
         L = self.e.layout
         u_h, u_f, u_s = signals
@@ -251,7 +259,7 @@ class StepKernel:
         estimate = self.estimate(fleet, Y[L.theta], Y[L.law_state])
         extra = {"v_hat": v_meas, "q_d": wish.q, "u_h": u_h, "u_f": u_f, "set_class": dec.overall, "group": dec.group,
                  "role": dec.role, "k_h": dec.k_h, "k_f": dec.k_f, "intent": intent,
-                 "true_class": self.true_class(Y, groups, situation),
+                 "true_class": self.true_class(fleet, Y, groups, situation, u_h0),
                  "own_law": engaged & self.e.owns(dec.role)}             # MachineController.owns
         rows = Rows(t, Y[L.q], Y[L.v], q_r, u_s, estimate, dec.authority, situation.margin, situation.inside, extra)
         if escaped.any():
@@ -271,13 +279,42 @@ class StepKernel:
                 extra[name] = value
         return rows
 
-    def true_class(self, Y, groups, situation):
-        """Definition 2's class of the true state (q, q̇): the arbiter's, unless it sees the observer's v̂."""
+    def true_class(self, fleet, Y, groups, situation, u_h0):
+        """Definition 2's class of the true state (q, q̇): the arbiter's, unless it sees the observer's v̂
+        (then the rows of the true q̇, through the stop with the operator's command held)."""
         if not self.e.observer:
             return situation.overall
-        rows = groups.rows
-        true_rows = RowValues(rows.x, self.e.table.row_K @ Y[self.e.layout.v], rows.z, rows.shifted_reference)
-        return classify(self.e.table, true_rows, self.e.sharing.bands).overall
+        rows, L = groups.rows, self.e.layout
+        v = Y[L.v]
+        true_rows = RowValues(rows.x, self.e.table.row_K @ v, rows.z, rows.shifted_reference)
+        seen = self.seen_rows(fleet, rows.x, v, u_h0)
+        return classify(self.e.table, true_rows, self.e.sharing.bands, seen).overall
+
+    def seen_rows(self, fleet, x, v, u_h):
+        """The row values x (P, N) the sharing function classifies (simulator.simulate's `class_rows`):
+        x itself without a backup model, else seen through the fail-safe stop from velocity v with the
+        operator's u_h held (backup.speed_aware_rows; the state's own stop in machine mode)."""
+        e = self.e
+        if e.backup is None:
+            return x
+        held = None if e.mode is Mode.MACHINE else acceleration(fleet.theta, v, u_h, np.empty_like(u_h))
+        return e.backup.speed_aware_rows(x, v, e.sharing.bands.b2, held)
+
+    def govern(self, fleet, q, v_meas, u_s, dec, theta_rate):
+        """backup.govern on u_s (n, N, in place) wherever the operator does not have authority; θ̂'s rate
+        (`theta_rate`, in place) is zeroed where the governor moved u_s: the law's update assumes
+        u_f acts, and it did not."""
+        cols = np.flatnonzero(dec.authority != HUMAN)
+        if cols.size == 0:
+            return
+        sel = None if cols.size == u_s.shape[1] else cols
+        sent, share = self.e.backup.govern(gather(fleet.theta, sel), gather(q, sel), gather(v_meas, sel),
+                                           gather(u_s, sel), self.e.dt)
+        moved = share > 0.0
+        if not moved.any():
+            return
+        scatter(u_s, sel, sent)
+        theta_rate[:, np.flatnonzero(moved) if sel is None else cols[moved]] = 0.0
 
     def escape_rows(self, t, q, v):
         """The row simulator.simulate records for a state an RK stage reached outside the group."""

@@ -116,6 +116,10 @@ class EulerLagrangeModel(ABC):
         rhs = u - self.coriolis_regressor(q, v, v) @ self.theta - self.gravity_regressor(q) @ self.theta
         return np.linalg.solve(self.mass(q), rhs)
 
+    def inverse_dynamics(self, q: np.ndarray, v: np.ndarray, a: np.ndarray) -> np.ndarray:
+        """u = M a + C q̇ + g with the true θ: the force that gives q̈ = a (inverse of `acceleration`)."""
+        return self.regressor(q, v, v, a) @ self.theta
+
     def input_matrix(self, q: np.ndarray) -> np.ndarray:
         """B(q) mapping actuator efforts τ to generalised forces u = B τ (identity by default)."""
         return np.eye(self.n)

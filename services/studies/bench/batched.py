@@ -66,7 +66,8 @@ def _scalar_loop(loop: ClosedLoop, problem: BatchProblem, i: int) -> ClosedLoop:
     target = ops.target[:, i].copy()
     human = AdversarialOperator(LineTrajectory(target, np.zeros(3)), ops.kp[:, i].copy(), target,
                                 float(ops.deflection[i]))
-    return ClosedLoop(loop.model, loop.feasible, human, loop.controller, loop.sharing, loop.reference)
+    return ClosedLoop(loop.model, loop.feasible, human, loop.controller, loop.sharing, loop.reference,
+                      loop.theta_hat0, loop.backup)
 
 
 def _scalar_rate(loop: ClosedLoop, problem: BatchProblem, robots: int, seconds: float) -> tuple[float, float]:
@@ -138,7 +139,8 @@ def polygon_loop(sides: int, controller: str = "ce") -> ClosedLoop:
     centre = np.array([0.0, 2.0, 0.0])
     T = np.concatenate([-(2.0 + K[:sides] @ centre), [-math.pi / 2, -math.pi / 2]])
     feasible = FeasibleSet.from_regions([Polytope.from_rows(K, T)])
-    return ClosedLoop(base.model, feasible, base.human, base.controller, base.sharing, base.reference)
+    return ClosedLoop(base.model, feasible, base.human, base.controller, base.sharing, base.reference,
+                      base.theta_hat0, base.backup)
 
 
 def scaling(quick: bool = True) -> dict:

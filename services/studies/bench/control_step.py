@@ -44,7 +44,7 @@ def _replay_inputs(data: dict, law: str, seconds: float):
         t = k * PERIOD
         cmd = loop.human.command(t, trace.q[k], trace.v[k])
         inputs.append((trace.q[k], trace.v[k], OperatorInput(loop.human.desired(t), cmd.force, cmd.intent)))
-    controller = SharedController(loop.model, loop.feasible, loop.controller, loop.sharing, loop.reference)
+    controller = SharedController(loop.model, loop.feasible, loop.controller, loop.sharing, loop.reference, loop.backup)
     return loop, q0, controller, inputs
 
 

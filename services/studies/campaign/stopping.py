@@ -129,7 +129,7 @@ class CoastOutcome:
 def _start(scenario, controller):
     """The scenario's closed loop, its shared controller and initial state, the true plant and its state."""
     loop, q0, v0 = scenario.closed_loop(controller)
-    ctrl = SharedController(loop.model, loop.feasible, loop.controller, loop.sharing, loop.reference)
+    ctrl = SharedController(loop.model, loop.feasible, loop.controller, loop.sharing, loop.reference, loop.backup)
     plant = Plant(loop.model, RobotSimConfig.from_table(scenario.data.get("robot_sim")))
     return loop, ctrl, ctrl.initial_state(q0, loop.theta_hat0), plant, plant.initial_state(q0, v0)
 
@@ -193,12 +193,15 @@ def forecast(samples, plant: Plant, feasible, t_fault: float, hold: float = WATC
 
 
 def delayed_loop_margin(scenario, duration: float, loop_delay: float, controller: str | None = None,
-                        period: float = CONTROL_PERIOD, hang: tuple[float, float] | None = None) -> tuple[float, float]:
+                        period: float = CONTROL_PERIOD, hang: tuple[float, float] | None = None,
+                        predictive: bool = True) -> tuple[float, float]:
     """(min margin, peak speed) of the scenario's sampled loop on the true plant when the torque loop is
     delayed by `loop_delay` s in all (CAN feedback age + command transit, rounded to whole periods): the
     controller computes from the state `loop_delay` old, as a CAN delay of loop_delay/2 each way does.
     `hang` = (START, DURATION): the controller does not run in that window (SIGSTOP shorter than the
-    drives' watchdog) and the drives hold its last torque; it then resumes on fresh feedback."""
+    drives' watchdog) and the drives hold its last torque; it then resumes on fresh feedback.
+    `predictive`: the controller is told the feedback's age (as the daemon measures it) and runs on
+    the predicted state (SharedController.step's `delay`); False: it runs on the old state as is."""
     loop, ctrl, state, plant, ps = _start(scenario, controller)
     model, human = loop.model, loop.human
     lag = int(round(loop_delay / period))
@@ -211,7 +214,8 @@ def delayed_loop_margin(scenario, duration: float, loop_delay: float, controller
         if not hung or k == 0:
             d = np.clip(human.command(t, q, qd).deflection, -1.0, 1.0)
             operator = OperatorInput(human.desired(t), human.kp * d, intent(human.kp, d))
-            state, out = ctrl.step(state, q, None if loop.controller.observer else qd, operator, period)
+            state, out = ctrl.step(state, q, None if loop.controller.observer else qd, operator, period,
+                                   lag * period if predictive else 0.0)
             tau = np.asarray(model.wheel_torques(q, out.u_s), float)
         for _ in range(2):
             ps = plant.step(ps, tau, period / 2)
