@@ -58,7 +58,7 @@ class BrakeBlock:
         most its value grows while the brakes stop the block from v_block: s_b(|v_b|) times the
         largest cosine between K_j,b and a velocity within `deflection` of v_b (the displacement
         lies in that cone). On Python floats: a few rows, every sample."""
-        speed = math.sqrt(sum(x * x for x in v_block))
+        speed = math.sqrt(_dot(v_block, v_block))
         if speed <= 0.0:
             return [0.0] * len(rows)
         reach = self.distance(speed)
@@ -69,7 +69,7 @@ class BrakeBlock:
             if n <= 0.0:
                 out.append(0.0)
                 continue
-            cosine = max(-1.0, min(1.0, sum(kj * vj for kj, vj in zip(k, v_block)) / (n * speed)))
+            cosine = max(-1.0, min(1.0, _dot(k, v_block) / (n * speed)))
             angle = max(math.acos(cosine) - self.deflection, 0.0)
             out.append(n * reach * math.cos(angle) if angle < _HALF_PI else 0.0)
         return out
@@ -123,22 +123,22 @@ class BackupModel:
         q = _as_floats(q)
         best = -math.inf
         for rows in _region_rows(self, feasible):
-            x = [sum(kj * qj for kj, qj in zip(k, q)) + t for k, t, _ in rows]
+            x = [_dot(k, q) + t for k, t, _ in rows]
             if max(x) < 0.0:
                 best = max(best, min(-(xj + rj) for xj, rj in zip(x, reach_of(rows))))
         return best
 
     def _state_reach(self, rows, v) -> list[float]:
         T = self.hold
-        reach = [max(sum(kj * vj for kj, vj in zip(k, v)), 0.0) * T for k, _, _ in rows]
+        reach = [max(_dot(k, v), 0.0) * T for k, _, _ in rows]
         return self._add_braking(rows, v, reach)
 
     def _command_reach(self, rows, v, a) -> list[float]:
         T = self.hold
         reach = []
         for k, _, _ in rows:
-            w = sum(kj * vj for kj, vj in zip(k, v))
-            alpha = sum(kj * aj for kj, aj in zip(k, a))
+            w = _dot(k, v)
+            alpha = _dot(k, a)
             advance = max(w * T + 0.5 * alpha * T * T, 0.0)
             if alpha < 0.0 and 0.0 < -w / alpha < T:
                 advance = max(advance, -w * w / (2.0 * alpha))
@@ -273,6 +273,19 @@ def speed_aware_rows(backup: BackupModel, feasible, rows: tuple[list, list], v, 
 
 def _all_row_norms(backup: BackupModel, feasible) -> list[float]:
     return [max(column) for column in zip(*_row_norms(backup, feasible))]
+
+def _dot(k, v) -> float:
+    """Σ k_i v_i left to right, as sum() adds (the same float result), without a generator."""
+    n = len(k)
+    if n == 3:
+        return k[0] * v[0] + k[1] * v[1] + k[2] * v[2]
+    if n == 2:
+        return k[0] * v[0] + k[1] * v[1]
+    total = 0.0
+    for ki, vi in zip(k, v):
+        total += ki * vi
+    return total
+
 
 def _as_floats(x) -> list[float]:
     return x.tolist() if isinstance(x, np.ndarray) else [float(e) for e in x]
