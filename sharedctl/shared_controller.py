@@ -12,7 +12,6 @@ same code.
 """
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
 from functools import cached_property
 
@@ -74,7 +73,6 @@ class StepOutput:
     v_used: np.ndarray       # q̇ (state feedback) or the observer's v̂ (output feedback)
     region_margins: np.ndarray
     backup_share: float = 0.0          # λ of backup.govern: 0 = u_s as sharing gave it, 1 = the fallback
-    backup_margin: float = math.nan    # the state's backup margin (m); NaN without a backup model
 
     @cached_property
     def q_r(self) -> np.ndarray:
@@ -182,10 +180,10 @@ class SharedController:
             else:
                 u_f = self.recovery_force(grp, q, v_used)
         u_s = shared_input(decision, u_h, u_f)
-        backup_share, backup_margin = 0.0, math.nan
+        backup_share = 0.0
         if backup is not None and decision.authority is not Authority.HUMAN:
             governed = govern(backup, model, feasible, q, v_used, u_s, dt)
-            u_s, backup_share, backup_margin = governed.u, governed.share, governed.margin
+            u_s, backup_share = governed.u, governed.share
             if backup_share > 0.0:
                 theta_next = theta_hat      # the law's update assumes u_f acts; it did not
         if out is not None and law_state.size:
@@ -198,7 +196,7 @@ class SharedController:
             u_s=u_s, u_h=u_h, u_f=u_f, authority=decision.authority, set_class=decision.situation.overall,
             group=decision.group, role=decision.role, k_h=decision.k_h, k_f=decision.k_f, reference=reference,
             theta_estimate=estimate, v_used=v_used, region_margins=feasible.region_margins(q, rows[0]),
-            backup_share=backup_share, backup_margin=backup_margin,
+            backup_share=backup_share,
         )
         sent = (state.sent + (u_s,))[-HISTORY:]
         next_state = ControllerState(arbiter, theta_next, law_role, law_next, observer_next, sent)   # every field

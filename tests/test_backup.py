@@ -125,6 +125,33 @@ def test_govern_returns_the_command_when_it_is_safe_and_a_safe_one_when_it_chang
         assert out.u[0] < u[0]                       # it only ever brakes harder towards x = 1
 
 
+def _passes(q, v, u, dt=0.002):
+    a = MODEL.acceleration(q, v, u)
+    return (BACKUP.command_margin(BOX, q, v, a) >= BACKUP.margin
+            and BACKUP.state_margin(BOX, q + v * dt + 0.5 * a * dt * dt, v + a * dt) >= BACKUP.margin)
+
+
+@settings(max_examples=80, deadline=None, derandomize=True)
+@given(x=st.floats(0.2, 0.9), y=st.floats(-0.8, 0.8), speed=st.floats(0.5, 2.5), heading=st.floats(-0.8, 0.8),
+       push=st.floats(50.0, 400.0))
+def test_govern_changes_the_command_no_more_than_needed(x, y, speed, heading, push):
+    """Where the governor moves a push towards the face x = 1, its λ is within 0.005 of the least λ
+    on the segment u → u_g that passes (an oracle: 30 halvings of the public margins' test)."""
+    q = np.array([x, y, 0.0])
+    v = np.array([speed * math.cos(heading), speed * math.sin(heading), 0.0])
+    u = np.array([push, 0.0, 0.0])
+    out = govern(BACKUP, MODEL, BOX, q, v, u, 0.002)
+    if out.share == 0.0:
+        return
+    u_g = MODEL.inverse_dynamics(q, v, BACKUP.fallback_acceleration(v))
+    lo, hi = 0.0, 1.0
+    for _ in range(30):
+        mid = 0.5 * (lo + hi)
+        lo, hi = (lo, mid) if _passes(q, v, u + mid * (u_g - u)) else (mid, hi)
+    assert _passes(q, v, out.u)
+    assert out.share - hi <= 0.005
+
+
 def test_govern_leaves_a_state_outside_the_envelope_to_the_law():
     """0.05 m from the face at 3 m/s no stop ends inside: the law's command is sent unchanged."""
     q, v, u = np.array([0.95, 0.0, 0.0]), np.array([3.0, 0.0, 0.0]), np.array([-900.0, 0.0, 0.0])

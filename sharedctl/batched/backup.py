@@ -8,12 +8,11 @@ polytope's minimum and maximum read it through `region_rows`). The arithmetic is
 code's, operation for operation: dot products are summed in its order (k₀x₀ + k₁x₁ + k₂x₂,
 then + t_j), each branch of BrakeBlock.advance / distance and each Python min/max is an
 np.where with the same comparison, so every value equals the scalar one to rounding and every
-decision is the same. (Where the scalar code calls numpy — np.linalg.norm for a block's speed
-in fallback_acceleration and _block_bounds, K q + T in _clearly_safe, Y θ in
-inverse_dynamics — BLAS may round differently from the plain sums here, in the last bit.)
+decision is the same. (Where the scalar code calls numpy — Y θ in inverse_dynamics — BLAS may
+round differently from the plain sums here, in the last bit.)
 
-`BackupTable.govern` bisects all robots at once: the robots that need it run `bisections`
-halvings together, each keeping its own λ.
+`BackupTable.govern` searches all robots at once: the robots that need it run backup._root's
+regula falsi together, each keeping its own bracket.
 """
 from __future__ import annotations
 
@@ -22,7 +21,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..backup import _HALF_PI, _INSIDE, BackupModel, BrakeBlock   # the scalar module's constants
+from ..backup import _INSIDE, _LAMBDA_RESOLUTION, BackupModel, BrakeBlock   # the scalar module's constants
 from ..constraints import FeasibleSet
 from .geometry import GroupTable
 from .plant import acceleration, regressor_times
@@ -50,7 +49,7 @@ class BackupTable:
     row_T: np.ndarray          # (P, 1)
     region_rows: tuple         # per polytope: its rows among the distinct rows
     region_norms: np.ndarray   # (R, B) max_j |K_j,b| per polytope and block (backup._row_norms)
-    all_norms: tuple           # (B,) the largest over the polytopes (backup._all_row_norms)
+    row_norms: tuple           # per block, |K_j,b| of every distinct row (P, 1)
 
     @staticmethod
     def of(model: BackupModel, feasible: FeasibleSet, table: GroupTable) -> "BackupTable":
@@ -63,8 +62,9 @@ class BackupTable:
                                     norms[rows, None]))
         region_norms = np.array([[float(np.max(np.linalg.norm(r.K[:, list(b.axes)], axis=1))) for b in model.blocks]
                                  for r in feasible.regions])
-        all_norms = tuple(max(column) for column in zip(*region_norms.tolist()))
-        return BackupTable(model, tuple(brakes), table.row_K, table.row_T, table.region_rows, region_norms, all_norms)
+        row_norms = tuple(np.array([[float(np.linalg.norm(k[list(b.axes)]))] for k in table.row_K])
+                          for b in model.blocks)
+        return BackupTable(model, tuple(brakes), table.row_K, table.row_T, table.region_rows, region_norms, row_norms)
 
     # ----- reach: how far each row may still move towards its face (P, N) --------------------
     def state_reach(self, v: np.ndarray) -> np.ndarray:
@@ -100,9 +100,10 @@ class BackupTable:
         x += self.row_T
         return x
 
-    def margin(self, x: np.ndarray, reach: np.ndarray) -> np.ndarray:
-        """max over the polytopes containing q of min_j −(x_j + reach_j); −inf in none (backup._margin)."""
-        value = -(x + reach)
+    def margin(self, x: np.ndarray, reach: np.ndarray, skip=None, far=None) -> np.ndarray:
+        """max over the polytopes containing q of min_j −(x_j + reach_j); −inf in none (backup._margin).
+        With `skip`, those rows' values are `far` (backup._Probe.merit's rows that cannot decide)."""
+        value = -(x + reach) if skip is None else np.where(skip, far, -(x + reach))
         best = np.full(x.shape[1], -np.inf)
         for rows in self.region_rows:
             inside = x[rows].max(axis=0) < 0.0
@@ -136,7 +137,7 @@ class BackupTable:
     def govern(self, theta: np.ndarray, q: np.ndarray, v: np.ndarray, u: np.ndarray, dt: float):
         """backup.govern for every robot (true parameters θ (n_θ, N), q, v, u (n, N)): returns
         (the command to send (n, N), λ (N,)). u where it is backup-safe or where not even u_g is;
-        elsewhere u + λ(u_g − u) with λ from `bisections` halvings of [0, 1]."""
+        elsewhere u + λ(u_g − u) with λ from backup._root's regula falsi, every robot its own bracket."""
         model = self.model
         delta = model.margin
         a = acceleration(theta, v, u, np.empty_like(u))
@@ -147,45 +148,82 @@ class BackupTable:
             return sent, share
         theta, q, v, u, a = (arr.take(cols, axis=1) for arr in (theta, q, v, u, a))
         x = self.values(q)
-        keep = ~self._acceptable(theta, q, v, x, u, a, dt)
+        m_u = self._merit(q, v, x, a, dt)
+        keep = ~(m_u >= 0.0)
         cols = cols[keep]
         if cols.size == 0:
             return sent, share
-        theta, q, v, u, x = theta[:, keep], q[:, keep], v[:, keep], u[:, keep], x[:, keep]
+        theta, q, v, u, x, a = (arr[:, keep] for arr in (theta, q, v, u, x, a))
+        m_u = m_u[keep]
         a_g = self.fallback_acceleration(v)
-        u_g = regressor_times(v, v, a_g, theta)                        # model.inverse_dynamics
-        keep = self._acceptable(theta, q, v, x, u_g, a_g, dt)
+        m_g = self._merit(q, v, x, a_g, dt)
+        keep = m_g >= 0.0
         cols = cols[keep]
         if cols.size == 0:
             return sent, share
-        theta, q, v, u, x, u_g = theta[:, keep], q[:, keep], v[:, keep], u[:, keep], x[:, keep], u_g[:, keep]
-        step = u_g - u
-        lo, hi = np.zeros(cols.size), np.ones(cols.size)
-        for _ in range(model.bisections):
-            mid = 0.5 * (lo + hi)
-            ok = self._acceptable(theta, q, v, x, u + mid * step, None, dt)
-            lo, hi = np.where(ok, lo, mid), np.where(ok, mid, hi)
-        sent[:, cols] = u + hi * step
+        theta, q, v, u, x, a, a_g = (arr[:, keep] for arr in (theta, q, v, u, x, a, a_g))
+        hi = self._root(q, v, x, a, a_g - a, m_u[keep], m_g[keep], dt)
+        u_g = regressor_times(v, v, a_g, theta)                        # model.inverse_dynamics
+        sent[:, cols] = u + hi * (u_g - u)
         share[cols] = hi
         return sent, share
 
-    def _acceptable(self, theta, q, v, x, command, a, dt: float) -> np.ndarray:
-        """govern's `acceptable`: the command held T_w then braked stays δ inside, and so does the stop
-        from the state one period later. `x`: the row values at q."""
+    def _root(self, q, v, x, a, step, f_lo, f_hi, dt: float) -> np.ndarray:
+        """backup._root for every robot: regula falsi with the Illinois rule on [lo, hi], the same
+        arithmetic; a robot whose bracket is done stops changing."""
+        model = self.model
+        lo, hi = np.zeros(f_lo.size), np.ones(f_lo.size)
+        kept = np.zeros(f_lo.size)
+        for _ in range(model.iterations):
+            active = ~(hi - lo <= _LAMBDA_RESOLUTION)
+            cols = np.flatnonzero(active)
+            if cols.size == 0:
+                break
+            low, h, fl, fh = lo[cols], hi[cols], f_lo[cols], f_hi[cols]
+            with np.errstate(divide="ignore", invalid="ignore"):     # f_lo = −inf: the midpoint
+                lam = (low * fh - h * fl) / (fh - fl)
+            lam = np.where((low < lam) & (lam < h), lam, 0.5 * (low + h))
+            m = self._merit(q[:, cols], v[:, cols], x[:, cols], a[:, cols] + lam * step[:, cols], dt)
+            passed = m >= 0.0
+            k = kept[cols]
+            hi[cols] = np.where(passed, lam, h)
+            f_hi[cols] = np.where(passed, m, np.where(k > 0, 0.5 * fh, fh))
+            lo[cols] = np.where(passed, low, lam)
+            f_lo[cols] = np.where(passed, np.where(k < 0, 0.5 * fl, fl), m)
+            kept[cols] = np.where(passed, -1.0, 1.0)
+        return hi
+
+    def _merit(self, q, v, x, a, dt: float) -> np.ndarray:
+        """backup._Probe.merit: min(command margin, the next state's backup margin) − δ, or the
+        command margin − δ where that fails; a row whose crude bound stays ≤ −δ counts with that
+        bound. `x`: the row values at q."""
         delta = self.model.margin
-        if a is None:
-            a = acceleration(theta, v, command, np.empty_like(command))
-        ok = ~(self.margin(x, self.command_reach(v, a)) < delta)
-        cols = np.flatnonzero(ok)
+        crude = self._crude(self._block_bounds(v, a, dt))
+        far = -(x + crude)
+        skip = ~(x + crude > -delta)
+        command = self.margin(x, self.command_reach(v, a), skip, far)
+        merit = command - delta
+        cols = np.flatnonzero(~(command < delta))
         if cols.size:
-            if cols.size < ok.size:
-                q, v, a = q[:, cols], v[:, cols], a[:, cols]
-            ok[cols] = self.state_margin(q + v * dt + 0.5 * a * dt * dt, v + a * dt) >= delta
-        return ok
+            qc, vc, ac = q[:, cols], v[:, cols], a[:, cols]
+            x1 = self.values(qc + vc * dt + 0.5 * ac * dt * dt)
+            sk = skip[:, cols]
+            x1 = np.where(sk, -1.0, x1)                    # a row that cannot decide is inside
+            state = self.margin(x1, self.state_reach(vc + ac * dt), sk, far[:, cols])
+            held = command[cols]
+            merit[cols] = np.where(state < held, state, held) - delta      # min(command, state)
+        return merit
+
+    def _crude(self, bounds: list) -> np.ndarray:
+        """Σ_b |K_j,b| C_b per distinct row and robot (P, N), summed in block order (backup._crude_rows)."""
+        total = self.row_norms[0] * bounds[0]
+        for n, c in zip(self.row_norms[1:], bounds[1:]):
+            total = total + n * c
+        return total
 
     def _block_bounds(self, v, a, dt: float) -> list:
-        """backup._block_bounds per robot: (|v_b| + |a_b| T)(T + dt) + s_b(|v_b| + |a_b| T)."""
-        T = self.model.hold
+        """backup._block_bounds per robot: (|v_b| + |a_b| T)(T + dt) + s_b(|v_b| + |a_b| T), T = max(T_w, dt)."""
+        T = max(self.model.hold, dt)
         bounds = []
         for brake in self.brakes:
             top = _speed(v[brake.axes]) + _speed(a[brake.axes]) * T
@@ -209,13 +247,11 @@ class BackupTable:
     def speed_aware_rows(self, x: np.ndarray, v: np.ndarray, far: float, a: np.ndarray | None = None) -> np.ndarray:
         """backup.speed_aware_rows on the row values x (P, N): each x_j < 0 moved towards its face by
         the state's reach (with `a`, that of holding the acceleration a), kept _INSIDE inside; a
-        robot whose rows all stay at or below −`far` under the crude bound is left unmoved."""
+        row that stays at or below −`far` under its crude bound is left unmoved."""
         held = np.zeros_like(v) if a is None else a
-        crude = None
-        for n, c in zip(self.all_norms, self._block_bounds(v, held, 0.0)):
-            crude = n * c if crude is None else crude + n * c
-        plain = np.all((x >= 0.0) | (x + crude <= -far), axis=0)
-        cols = np.flatnonzero(~plain)
+        crude = self._crude(self._block_bounds(v, held, 0.0))
+        near = (x < 0.0) & (x + crude > -far)
+        cols = np.flatnonzero(near.any(axis=0))
         if cols.size == 0:
             return x
         xs, vs = x[:, cols], v[:, cols]
@@ -223,7 +259,7 @@ class BackupTable:
         moved = xs + reach
         moved = np.where(-_INSIDE < moved, -_INSIDE, moved)          # min(x + r, −_INSIDE)
         out = x.copy()
-        out[:, cols] = np.where(xs >= 0.0, xs, moved)
+        out[:, cols] = np.where(near[:, cols], moved, xs)
         return out
 
 
@@ -266,7 +302,8 @@ def _advance(brake: BrakeRows, v_block: np.ndarray) -> np.ndarray:
         cosine = _dot(brake.parts, v_block) / (norms * speed)
     cosine = np.where(cosine < 1.0, cosine, 1.0)                       # min(1.0, ·)
     cosine = np.where(cosine > -1.0, cosine, -1.0)                     # max(−1.0, ·)
-    angle = np.arccos(cosine)
-    angle -= block.deflection
-    angle = np.where(0.0 > angle, 0.0, angle)                          # max(·, 0.0)
-    return np.where(angle < _HALF_PI, norms * reach * np.cos(angle), 0.0)
+    cos_d, sin_d = block.cone
+    with np.errstate(invalid="ignore"):                                 # at rest: s_b = 0 below
+        turned = cosine * cos_d + np.sqrt(1.0 - cosine * cosine) * sin_d
+    full = norms * reach
+    return np.where(cosine >= cos_d, full, np.where(turned > 0.0, full * turned, 0.0))
