@@ -2,11 +2,12 @@
 
 Why sampled (like sampled.py) rather than the continuous simulator: the controller daemon runs at
 500 Hz with the operator's commands arriving late, lost or stale, and a mux timeout or a QP are
-discrete-time things; sampling all four strategies at the same 2 ms with the same operator link
+discrete-time things; sampling every strategy at the same 2 ms with the same operator link
 (operator_link.py) compares them as they would run on the robot. The plant is integrated by
 RK4 at `control_period / substeps` with the force held (zero-order hold), exactly as sampled.py.
 
-`build_strategy(name, loop)` makes `human`, `mux`, `cbf` or `shared` for a scenario's closed loop.
+`build_strategy(name, loop)` makes `human`, `mux`, `cbf`, `shared` or `shared-nobackup` (the shared law
+without the scenario's backup-safe sets) for a scenario's closed loop.
 """
 from __future__ import annotations
 
@@ -22,7 +23,7 @@ from .mux import PriorityMux
 from .operator_link import IDEAL, LinkConditions, OperatorLink
 from .strategy import NominalModel, OperatorAlone, SharedStrategy, Strategy
 
-STRATEGIES = ("human", "mux", "cbf", "shared")
+STRATEGIES = ("human", "mux", "cbf", "shared", "shared-nobackup")
 CONTROL_PERIOD = 0.002   # s, the daemon's 500 Hz
 
 
@@ -30,8 +31,8 @@ def build_strategy(name: str, loop: ClosedLoop, theta: np.ndarray | None = None)
     """A strategy for this closed loop; `theta` the nominal parameters of mux and cbf (default: the true θ)."""
     if name == "human":
         return OperatorAlone()
-    if name == "shared":
-        return SharedStrategy.of(loop)
+    if name in ("shared", "shared-nobackup"):
+        return SharedStrategy.of(loop, backup=name == "shared")
     nominal = NominalModel.of(loop.model, theta)
     if name == "mux":
         return PriorityMux(loop.feasible, loop.sharing.bands, nominal)

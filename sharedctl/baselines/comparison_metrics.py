@@ -6,6 +6,11 @@
   (the human model's, not the delayed copy the controller holds) and Π the Euclidean projection
   onto the feasible set (the nearest point of the nearest polytope): how far the robot is from
   the best it could do for the operator without leaving the set. All coordinates (m and rad);
+* time_to_goal — the first sample time t_k from which |q − Π(q_d)| ≤ GOAL_TOLERANCE holds at every
+  sample to the end of the run (s; 0 if it holds from the start), with Π(q_d) as in tracking_error
+  at the same instant: for a wish that comes to rest, the time to reach its projected end point and
+  stay there; for a moving wish, the time from which the robot follows it within the tolerance.
+  Null when the last sample is farther than the tolerance or the run was cut short (not finite);
 * human_authority — fraction of samples where the operator's force passed unchanged (u = u_h);
 * interventions — how often the strategy took the operator's force away (u = u_h → u ≠ u_h);
 * control_effort — ∫ |u|² dt over the run, N² s;
@@ -21,6 +26,11 @@ import quadprog
 
 from ..constraints import FeasibleSet
 from .comparison import ComparisonTrace
+
+#: time_to_goal's tolerance on |q − Π(q_d)| (m and rad in one norm): above √2·ε = 0.071 m, the offset of the
+#: machine's projected reference from a corner of two faces (ε = 0.05 m, reference.py), so a robot held at
+#: the reference the machine can reach counts as arrived
+GOAL_TOLERANCE = 0.1
 
 
 def project(feasible: FeasibleSet, point: np.ndarray) -> np.ndarray:
@@ -40,9 +50,9 @@ def project(feasible: FeasibleSet, point: np.ndarray) -> np.ndarray:
 def summarize(trace: ComparisonTrace, feasible: FeasibleSet, control_period: float) -> dict:
     steps = int(trace.t.size)
     if steps == 0:
-        return {"violations": 0, "min_margin": None, "tracking_error": None, "human_authority": None,
-                "interventions": 0, "control_effort": 0.0, "jerk_rms": None, "hands_off": None,
-                "max_residual": None, "finite": bool(trace.finite), "steps": 0, "duration": 0.0}
+        return {"violations": 0, "min_margin": None, "tracking_error": None, "time_to_goal": None,
+                "human_authority": None, "interventions": 0, "control_effort": 0.0, "jerk_rms": None,
+                "hands_off": None, "max_residual": None, "finite": bool(trace.finite), "steps": 0, "duration": 0.0}
     projected = _projected_wishes(feasible, trace.wish)
     err = np.linalg.norm(trace.q - projected, axis=1)
     passed = trace.operator_in_control
@@ -53,6 +63,7 @@ def summarize(trace: ComparisonTrace, feasible: FeasibleSet, control_period: flo
         "violations": int(np.count_nonzero(~trace.inside)),
         "min_margin": float(np.min(trace.margin)),
         "tracking_error": float(np.sqrt(np.mean(err**2))),
+        "time_to_goal": time_to_goal(trace.t, err, GOAL_TOLERANCE) if trace.finite else None,
         "human_authority": float(np.mean(passed)),
         "interventions": taken,
         "control_effort": float(np.sum(np.sum(trace.u**2, axis=1)) * control_period),
@@ -63,6 +74,16 @@ def summarize(trace: ComparisonTrace, feasible: FeasibleSet, control_period: flo
         "steps": steps,
         "duration": float(steps * control_period),
     }
+
+
+def time_to_goal(t: np.ndarray, distance: np.ndarray, tolerance: float) -> float | None:
+    """The first t_k with distance ≤ tolerance at every sample from k to the end; None if not at the last."""
+    away = np.flatnonzero(~(distance <= tolerance))          # NaN counts as away
+    if away.size == 0:
+        return float(t[0])
+    if away[-1] == distance.size - 1:
+        return None
+    return float(t[away[-1] + 1])
 
 
 def _projected_wishes(feasible: FeasibleSet, wishes: np.ndarray) -> np.ndarray:

@@ -10,7 +10,10 @@ is younger than that topic's timeout, and forwards it unchanged; nothing is blen
   law's own bands (Definition 2 with b0, b1, b2, sets.py): the state is not SAFE — some row x_j
   of every polytope containing q is within b2 of its face and approaches it faster than the
   allowance f_b2(x_j) = 1/(x_j + b2) − 1/b2, or approaches at all within b0, or q is in no
-  polytope. Standing still, or moving away from every face, is never "near the border".
+  polytope. Standing still, or moving away from every face, is never "near the border": the
+  shared law's standoff band (sets.py: a state at rest within b_s of a face is not safe, so that
+  its machine keeps authority at its rest point) is not part of the rule — a hold re-published at
+  rest would never time out and never give the operator back.
 * **selection** — hold while its last message is at most `hold_timeout` old, else operator. The
   timeout is the only hysteresis, as in twist_mux: after the last hold message the operator gets
   control back `hold_timeout` later.
@@ -33,7 +36,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..constraints import FeasibleSet
-from ..sets import Bands, SetClass, classify
+from ..sets import Bands, allowance, hazardous_rows
 from .strategy import Command, NominalModel, Strategy, checked
 
 OPERATOR, HOLD = 0, 1   # Command.mode: the selected input
@@ -58,8 +61,18 @@ class PriorityMux(Strategy):
         return MuxState()
 
     def near_border(self, q: np.ndarray, v: np.ndarray) -> bool:
-        """The border monitor's rule: the state is not SAFE by Definition 2 (with b0)."""
-        return classify(self.feasible, q, v, self.bands).overall is not SetClass.SAFE
+        """The border monitor's rule: the state is not SAFE by Definition 2 with b0 (no standoff band):
+        no polytope containing q has every row either farther than b2 from its face or approaching it no
+        faster than f_b2, and none hazardous (sets.hazardous_rows: within b1 at f_b1, or within b0 at all)."""
+        b2 = self.bands.b2
+        for poly in self.feasible.regions:
+            x = poly.values(q)
+            if not np.all(x < 0.0):
+                continue
+            x_dot = poly.K @ v
+            if not np.any(((x >= -b2) & (x_dot > allowance(x, b2))) | hazardous_rows(x, x_dot, self.bands)):
+                return False
+        return True
 
     def step(self, state: MuxState, q, v, operator, dt):
         u_h = np.asarray(operator.force, float)

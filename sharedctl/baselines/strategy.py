@@ -7,7 +7,10 @@ the strategy's state. This module holds the interface and the two strategies tha
 design of their own:
 
 * `human` — the operator alone: u = u_h (sharing.Mode.HUMAN, without the machine);
-* `shared` — the paper's law (46)/(47) with its machine law: `SharedController` as the daemon runs it.
+* `shared` — the paper's law (46)/(47) with its machine law: `SharedController` as the daemon runs it,
+  with the scenario's backup-safe sets (sharedctl/backup.py) when it has a brake model;
+* `shared-nobackup` — the same law with `[backup] enabled = false`: the paper's loop, no speed-aware
+  sets and no governor, so that the two measure what keeping the fail-safe stop inside Q_a costs.
 
 `mux` (mux.py) and `cbf` (cbf.py) are the alternatives people use today.
 """
@@ -79,10 +82,11 @@ class SharedStrategy(Strategy):
     name: str = "shared"
 
     @staticmethod
-    def of(loop: ClosedLoop) -> "SharedStrategy":
+    def of(loop: ClosedLoop, backup: bool = True) -> "SharedStrategy":
+        """The loop's controller; `backup=False` drops its backup model (`shared-nobackup`)."""
         return SharedStrategy(SharedController(loop.model, loop.feasible, loop.controller,
-                                               loop.sharing, loop.reference, loop.backup),
-                              loop.theta_hat0)
+                                               loop.sharing, loop.reference, loop.backup if backup else None),
+                              loop.theta_hat0, "shared" if backup else "shared-nobackup")
 
     def initial_state(self, q0, v0):
         return self.controller.initial_state(q0, self.theta_hat0)

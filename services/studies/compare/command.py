@@ -2,13 +2,16 @@
 
 Strategies (sharedctl/baselines/): `human` (the operator alone), `mux` (twist_mux-style
 priority/timeout arbitration with a hold at the border), `cbf` (a relative-degree-2 CBF QP
-safety filter) and `shared` (the paper's law). Each runs in the same sampled loop (500 Hz, plant
-RK4 at 2 kHz) behind the same in-process operator link, once ideal and once with 100 ms each way
-and 20 % command loss (seeded). The JSON's `results` hold one row per run with `strategy`,
-`scenario` (the scenario and the condition), `base_scenario`, `condition` and the metrics of
-sharedctl/baselines/comparison_metrics.py; `model_sensitivity` repeats `mux` and `cbf` on the
-adversarial scenarios with wrong nominal parameters (θ̂ = 0.5θ and 2θ). Exit 1 if the shared law violated the set
-anywhere (the one guarantee this command checks), 2 on bad arguments.
+safety filter), `shared` (the paper's law with the backup-safe sets of sharedctl/backup.py) and
+`shared-nobackup` (the same law with `[backup] enabled = false`, the paper's loop). Each runs in
+the same sampled loop (500 Hz, plant RK4 at 2 kHz) behind the same in-process operator link, once
+ideal and once with 100 ms each way and 20 % command loss (seeded). The JSON's `results` hold one
+row per run with `strategy`, `scenario` (the scenario and the condition), `base_scenario`,
+`condition` and the metrics of sharedctl/baselines/comparison_metrics.py (`goal_tolerance` is
+time_to_goal's); `backup_price` pairs `shared` with `shared-nobackup` per scenario and condition
+(price.py); `model_sensitivity` repeats `mux` and `cbf` on the adversarial scenarios with wrong
+nominal parameters (θ̂ = 0.5θ and 2θ). Exit 1 if either shared variant violated the set anywhere
+(the one guarantee this command checks), 2 on bad arguments.
 """
 from __future__ import annotations
 
@@ -19,9 +22,10 @@ from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
 
 from sharedctl.baselines.comparison import CONTROL_PERIOD, STRATEGIES, ComparisonTrace, build_strategy, run
-from sharedctl.baselines.comparison_metrics import summarize
+from sharedctl.baselines.comparison_metrics import GOAL_TOLERANCE, summarize
 from sharedctl.baselines.operator_link import IDEAL, IMPAIRED, LinkConditions
 
+from .price import backup_price
 from .scenarios import Entry, scenario_set
 
 CONDITIONS = (IDEAL, IMPAIRED)
@@ -39,7 +43,8 @@ class Outcome:
 
 
 def add_parser(subparsers) -> None:
-    p = subparsers.add_parser("compare", help="compare human, mux, CBF and shared control on the scenario set")
+    p = subparsers.add_parser("compare", help="compare human, mux, CBF and shared control (with and without the "
+                                              "backup-safe sets) on the scenario set")
     p.add_argument("--quick", action="store_true", help="shorter paper runs (minutes, not the committed report)")
     p.add_argument("--json", metavar="OUT", help="write the results as JSON to OUT ('-' for stdout)")
     p.add_argument("--report", metavar="DIR", help="write report.md and its figures to DIR")
@@ -104,10 +109,12 @@ def document(outcomes: list[Outcome], quick: bool, sensitivity: list[dict] | Non
         "version": ver,
         "quick": quick,
         "control_period": CONTROL_PERIOD,
+        "goal_tolerance": GOAL_TOLERANCE,
         "strategies": sorted({o.row["strategy"] for o in outcomes}, key=STRATEGIES.index),
         "conditions": {c.name: asdict(c) for c in CONDITIONS},
         "scenarios": [{"name": n, "duration": e.duration, "source": e.source} for n, e in entries.items()],
         "results": [o.row for o in outcomes],
+        "backup_price": backup_price(outcomes),
         "model_sensitivity": sensitivity or [],
     }
 
@@ -135,8 +142,8 @@ def handle(args) -> int:
         path = write_report(outcomes, doc, Path(args.report))
         if not quiet:
             print(f"report: {path}")
-    shared_bad = [o.row["scenario"] for o in outcomes
-                  if o.row["strategy"] == "shared" and (o.row["violations"] or not o.row["finite"])]
+    shared_bad = [f"{o.row['scenario']} ({o.row['strategy']})" for o in outcomes
+                  if o.row["strategy"].startswith("shared") and (o.row["violations"] or not o.row["finite"])]
     if shared_bad:
         print(f"sharedctl compare: the shared law violated the set in {', '.join(shared_bad)}", file=sys.stderr)
         return 1
@@ -144,7 +151,8 @@ def handle(args) -> int:
 
 
 def _progress_line(row: dict) -> None:
-    print(f"{row['scenario']:34s} {row['strategy']:7s} violations {row['violations']:5d}  "
-          f"min margin {row['min_margin']:+.3f} m  tracking {row['tracking_error']:.3f}  "
+    goal = "—" if row.get("time_to_goal") is None else f"{row['time_to_goal']:.2f} s"
+    print(f"{row['scenario']:34s} {row['strategy']:15s} violations {row['violations']:5d}  "
+          f"min margin {row['min_margin']:+.3f} m  tracking {row['tracking_error']:.3f}  goal {goal:>7s}  "
           f"authority {row['human_authority']:.2f}  interventions {row['interventions']:3d}  "
           f"effort {row['control_effort']:.3g} N²s  jerk {row['jerk_rms']:.3g}", flush=True)

@@ -15,7 +15,7 @@ from matplotlib.lines import Line2D
 
 from sharedctl.services.studies.figures import FONT, draw_feasible_set
 
-COLOURS = {"human": "#7f7f7f", "mux": "#ff7f0e", "cbf": "#2ca02c", "shared": "#1f77b4"}
+COLOURS = {"human": "#7f7f7f", "mux": "#ff7f0e", "cbf": "#2ca02c", "shared": "#1f77b4", "shared-nobackup": "#9467bd"}
 METRICS = (  # key, axis label, log scale
     ("violations", "violations (samples outside)", False),
     ("min_margin", "min margin (m)", False),
