@@ -24,8 +24,8 @@ Two checks, both per row of a polytope that contains q (`BackupModel`):
 
 `govern` returns the command to send: u itself when it is backup-safe, else the point of the
 segment from u to the fallback u_g closest to u that is; when not even u_g is (the state is
-outside the envelope: no stop from here ends δ inside), u unchanged — the law's barrier brakes
-harder than u_g. u_g decelerates each block along −v_b at
+outside the envelope: no stop from here ends δ inside), the one of u and u_g whose stop ends
+farther inside. u_g decelerates each block along −v_b at
 max(a_c + k|v_b| + a_extra, …) — harder than the brakes — or stops it within T_w at low speed; under
 u_g the state's backup margin never decreases, so u_g is always available once the state is
 backup-safe (docs/control.md §10 for the argument). Pure: no clocks, no I/O.
@@ -215,9 +215,12 @@ def govern(backup: BackupModel, model, feasible, q: np.ndarray, v: np.ndarray, u
     g_list = a_g.tolist()
     m_g = probe.merit(g_list, _block_bounds(backup, v_list, g_list, dt))
     if not m_g >= 0.0:
-        # outside the envelope (the stop from here cannot end δ inside whatever is sent): the
-        # governor has nothing better than the law, whose barrier brakes harder than u_g
-        return Governed(u, 0.0, False)
+        # outside the envelope (no stop from here ends δ inside whatever is sent): the one of u and
+        # u_g whose stop ends farther inside — a law braking at its barrier beats u_g, a law still
+        # tracking towards the face does not (u_g never lowers the state's margin, §10)
+        if m_u >= m_g:
+            return Governed(u, 0.0, False)
+        return Governed(model.inverse_dynamics(q, v, a_g), 1.0, False)
     step = [g - h for g, h in zip(g_list, a_u)]
 
     def merit(lam: float) -> float:

@@ -141,7 +141,7 @@ def test_govern_changes_the_command_no_more_than_needed(x, y, speed, heading, pu
     v = np.array([speed * math.cos(heading), speed * math.sin(heading), 0.0])
     u = np.array([push, 0.0, 0.0])
     out = govern(BACKUP, MODEL, BOX, q, v, u, 0.002)
-    if out.share == 0.0:
+    if out.share == 0.0 or not out.feasible:
         return
     u_g = MODEL.inverse_dynamics(q, v, BACKUP.fallback_acceleration(v))
     lo, hi = 0.0, 1.0
@@ -152,11 +152,23 @@ def test_govern_changes_the_command_no_more_than_needed(x, y, speed, heading, pu
     assert out.share - hi <= 0.005
 
 
-def test_govern_leaves_a_state_outside_the_envelope_to_the_law():
-    """0.05 m from the face at 3 m/s no stop ends inside: the law's command is sent unchanged."""
+def test_govern_leaves_a_state_outside_the_envelope_to_a_law_braking_harder_than_the_fallback():
+    """0.05 m from the face at 3 m/s no stop ends inside: a law braking at 900 N is sent unchanged."""
     q, v, u = np.array([0.95, 0.0, 0.0]), np.array([3.0, 0.0, 0.0]), np.array([-900.0, 0.0, 0.0])
     out = govern(BACKUP, MODEL, BOX, q, v, u, 0.002)
     assert not out.feasible and out.share == 0.0 and np.array_equal(out.u, u)
+
+
+@pytest.mark.parametrize("push", [0.0, 120.0, 400.0])
+def test_govern_sends_the_fallback_outside_the_envelope_when_the_law_does_not_brake_harder(push):
+    """0.3 m from the face at 2 m/s no stop ends δ inside; a law still tracking towards the face (or
+    coasting) must not go out unchanged: the fallback u_g, which brakes along −v, is sent instead."""
+    q, v, u = np.array([0.7, 0.0, 0.0]), np.array([2.0, 0.0, 0.0]), np.array([push, 0.0, 0.0])
+    out = govern(BACKUP, MODEL, BOX, q, v, u, 0.002)
+    u_g = MODEL.inverse_dynamics(q, v, BACKUP.fallback_acceleration(v))
+    assert not out.feasible and out.share == 1.0
+    np.testing.assert_allclose(out.u, u_g, rtol=1e-12)
+    assert out.u[0] < 0.0
 
 
 @pytest.mark.parametrize("controller", S.CONTROLLERS)

@@ -136,8 +136,9 @@ class BackupTable:
 
     def govern(self, theta: np.ndarray, q: np.ndarray, v: np.ndarray, u: np.ndarray, dt: float):
         """backup.govern for every robot (true parameters θ (n_θ, N), q, v, u (n, N)): returns
-        (the command to send (n, N), λ (N,)). u where it is backup-safe or where not even u_g is;
-        elsewhere u + λ(u_g − u) with λ from backup._root's regula falsi, every robot its own bracket."""
+        (the command to send (n, N), λ (N,)). u where it is backup-safe; where not even u_g is, the one of
+        u and u_g whose stop ends farther inside (λ = 0 or 1); elsewhere u + λ(u_g − u) with λ from
+        backup._root's regula falsi, every robot its own bracket."""
         model = self.model
         delta = model.margin
         a = acceleration(theta, v, u, np.empty_like(u))
@@ -158,6 +159,11 @@ class BackupTable:
         a_g = self.fallback_acceleration(v)
         m_g = self._merit(q, v, x, a_g, dt)
         keep = m_g >= 0.0
+        hopeless = np.flatnonzero(~keep & ~(m_u >= m_g))       # outside the envelope, u_g's stop ends farther in
+        if hopeless.size:
+            sent[:, cols[hopeless]] = regressor_times(v[:, hopeless], v[:, hopeless], a_g[:, hopeless],
+                                                      theta[:, hopeless])
+            share[cols[hopeless]] = 1.0
         cols = cols[keep]
         if cols.size == 0:
             return sent, share
