@@ -138,7 +138,8 @@ def random_message(rng: random.Random) -> Any:
                     wheel_torques=_vec(rng, ROBOT_DIMS.n_wheels), theta_hat=_vec(rng, ROBOT_DIMS.n_theta),
                     min_margin=rng.uniform(-1, 1), region_margins=_vec(rng, rng.randint(0, 6)),
                     estop_active=rng.random() < 0.1, lease_holder=rng.choice((None, _tok(rng))),
-                    link=LinkHealth(rng.uniform(0, 500), rng.random(), rng.uniform(0, 1e3), rng.uniform(0, 1e3)))
+                    link=LinkHealth(rng.uniform(0, 500), rng.random(), rng.uniform(0, 1e3), rng.uniform(0, 1e3)),
+                    lease_since=rng.choice((None, rng.uniform(0, 1e6))))
     if kind.KIND == "event":
         return kind(**common, kind=rng.choice(list(EventKind)), severity=rng.choice(list(Severity)),
                     source=_tok(rng), text="é✓ text\n"[: rng.randint(0, 8)] * rng.randint(0, 30))

@@ -37,7 +37,7 @@ from .wire_types import (
     vector,
 )
 
-WIRE_VERSION: tuple[int, int] = (1, 1)
+WIRE_VERSION: tuple[int, int] = (1, 2)
 """(major, minor) written by this implementation; see protocol/README.md, "Versioning"."""
 
 
@@ -222,6 +222,8 @@ class RobotState:
     estop_active: bool = wire(boolean)
     lease_holder: str | None = wire(optional(token))  # operator id holding control, or None
     link: LinkHealth = wire(nested(LinkHealth))
+    lease_since: float | None = wire(optional(_time), default=None)  # since 1.2: s, controller clock, when
+    #                                                   the holder was granted control (None while free)
 
     def _check(self) -> None:
         if self.active_group is not None and self.active_group >= len(self.group_classes):

@@ -123,6 +123,7 @@ class ControllerDaemon:
         self.last_authority = None
         self.last_set_class = None
         self.lease_holder = None
+        self.lease_since: float | None = None   # monotonic instant the holder was granted the lease
         self.last_hands_off_reason = None
         self.last_rejected = 0
         self.last_tick_at: float | None = None
@@ -249,7 +250,7 @@ class ControllerDaemon:
             rejected = self.policy.rejected
             rejections = dict(self.policy.rejections) if rejected != self.last_rejected else None
             lease_changes = self.policy.lease.take_changes()
-            self.lease_holder = self.policy.lease.holder_id
+            self.lease_holder, self.lease_since = self.policy.lease.holder_id, self.policy.lease.holder_since
         self.status = status
         if rejections is not None:
             self.last_rejected = rejected
@@ -388,9 +389,11 @@ class ControllerDaemon:
         if out is not None:
             out.q_r                     # noqa: B018 — worked out here, in this stage's period (lazy, then kept)
         self.state_seq += 1
-        return (self.state_seq, time.time(), self.q, v_used, out, self.loop.feasible, self.loop.sharing.bands,
+        wall = time.time()
+        since = None if self.lease_since is None else self.lease_since + (wall - time.monotonic())   # wall clock
+        return (self.state_seq, wall, self.q, v_used, out, self.loop.feasible, self.loop.sharing.bands,
                 self.tau, self.u_s, self.mode is Mode.ESTOPPED, self.lease_holder, link,
-                out.theta_estimate if out is not None else self.state.theta_hat)
+                out.theta_estimate if out is not None else self.state.theta_hat, since)
 
     # --------------------------------------------------------------- shutdown
     def shutdown(self) -> None:

@@ -96,6 +96,11 @@ class OperatorLease:
     def holder_id(self) -> str | None:
         return None if self.holder is None else self.holder.operator_id
 
+    @property
+    def holder_since(self) -> float | None:
+        """When the holder was granted the lease (the caller's clock; renewals keep it), None while free."""
+        return None if self.holder is None else self.holder.since
+
     def take_changes(self) -> list[LeaseChange]:
         """Changes of holder since the last call (oldest first)."""
         changes, self._changes = self._changes, []

@@ -19,6 +19,8 @@ RobotState field mapping (see the daemon's docstring for where each value comes 
   min_margin      FeasibleSet.margin(q), the largest of region_margins = FeasibleSet.region_margins(q)
                   (both clipped to ±1e12)
   lease_holder    operator_id holding the authority lease (lease.py), None while it is free
+  lease_since     when that holder was granted the lease, on the clock of `time` (wall), None while free:
+                  the run's t = 0 for the fault campaign (services/faults/stack.py)
   link            latency from send_time, loss from seq gaps, staleness, oldest wheel feedback age,
                   rejected_messages (every refused operator command and lease request)
 """
@@ -80,7 +82,7 @@ class Link:
 
 def robot_state(
     seq: int, time: float, q, v, out, feasible, bands, wheel_torques, u_s, estop_active: bool,
-    lease_holder: str | None, link: Link, theta_hat,
+    lease_holder: str | None, link: Link, theta_hat, lease_since: float | None = None,
 ) -> RobotState:
     """A `RobotState` from the last `StepOutput` (`out`) and what the daemon measured."""
     n = len(q)
@@ -113,6 +115,7 @@ def robot_state(
             staleness_ms=_ms(link.staleness), can_feedback_age_ms=_ms(link.can_feedback_age),
             rejected_messages=max(int(link.rejected), 0),
         ),
+        lease_since=None if lease_since is None or not math.isfinite(lease_since) else max(lease_since, 0.0),
     )
 
 

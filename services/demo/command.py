@@ -23,8 +23,13 @@ connects to the controller, whose telemetry it needs):
     demo        connects to R and C
     CAN         python-can udp_multicast, host-local (hop_limit=0), a free port per run
 
-The run's clock starts with the first RobotState that shows the operator in control (the
-console starts its script on its first RobotState, ~20–40 ms earlier).
+The run's clock: t = 0 is the instant the controller granted the operator the lease, as it
+reports it in every RobotState (`lease_since`); the demo learns it with the first RobotState
+that names a holder, one telemetry period or more later, and arms the faults then (the console
+starts its script on its first RobotState and takes the lease with its first command). Timed
+faults fire on that clock (services/faults/stack.py) and the JSON's `fault_states` hold the
+ground truth and the reported torques around the instant each actually fired, and around each
+emergency stop (measure.states_at), for the fault campaign's forecasts.
 """
 from __future__ import annotations
 
@@ -42,7 +47,7 @@ from sharedctl.services.children import (Child, free_udp_port, raise_priority, s
 from sharedctl.services.faults.stack import FaultStack, add_arguments as add_fault_arguments
 from sharedctl.services.security.secure_stack import SecureStack, add_arguments as add_secure_arguments
 from sharedctl.services.recording.launch import add_argument as add_record_argument, open_demo_recording
-from .measure import TOLERANCE, Recorder, deviation, measure, plant_reference_run, reference_run
+from .measure import TOLERANCE, Recorder, deviation, measure, plant_reference_run, reference_run, states_at
 from sharedctl.services.lifecycle import StopFlag
 from sharedctl.services.scenario_files import load
 from sharedctl.services.summary_output import emit, read_json
@@ -145,6 +150,7 @@ def run(args) -> int:
         session = secure.open_session(lambda: open_session(connect=[robot_ep, controller_ep]))
         if recording is not None:
             recording.attach(session)
+        faults.attach(session, args.robot_id)
         subscribers = [session.declare_subscriber(keys.truth_key(args.robot_id), rec.on_truth),
                 session.declare_subscriber(keys.state_key(args.robot_id), rec.on_state),
                 session.declare_subscriber(keys.events_key(args.robot_id), rec.on_event)]
@@ -155,7 +161,7 @@ def run(args) -> int:
                 raise RuntimeError(f"{', '.join(dead)} exited early" if dead else "interrupted" if stop.stopped
                                    else "the operator never got control (no RobotState with a lease holder)")
         t0 = rec.operator_start
-        faults.arm(t0)
+        faults.arm(t0, rec.lease_wall)
         while not stop.stopped and time.monotonic() < t0 + duration:
             failure = faults.tick(time.monotonic(), children,
                                   lambda: start_child("controller.restart",
@@ -164,7 +170,7 @@ def run(args) -> int:
             if dead or failure:
                 failure = failure or f"{', '.join(dead)} exited during the run"
                 break
-            stop.wait(0.05)
+            stop.wait(faults.wait_time(time.monotonic()))
     except RuntimeError as exc:
         failure = str(exc)
     finally:
@@ -208,9 +214,26 @@ def run(args) -> int:
                          and result["estops"] == 0)   # an estop means the scenario did not run
     if not faults.empty:   # intended faults: judged as services/faults/stack.py says
         summary.update(faults=faults.plan.specs, injected=faults.report())
+        summary["fault_states"] = states_at(rec, _fault_instants(summary["injected"], faults.plan, result))
         summary["ok"] = faults.judge(summary, children, result, failure)
     _report(summary, args, children, log_dir)
     return 0 if summary["ok"] else 1
+
+
+MAX_ESTOP_STATES = 3     # estops whose surroundings the JSON keeps
+
+
+def _fault_instants(injected: dict, plan, result: dict) -> list[tuple[str, float]]:
+    """(label, t on the run's clock) of every fault that fired (its actual instant), of every timed CAN
+    bus-off and link blackout (their windows open on the run's clock), and of the first emergency stops
+    (the controller's own time of each)."""
+    out = [(p["fault"], p["done_at"]) for p in injected.get("processes", []) if p.get("done_at") is not None]
+    for stream, link in plan.links.items():
+        key = "busoff" if stream == "can" else "blackout"
+        out += [(f"{stream}.{key}={start:g},{length:g}", start) for start, length in link.blackouts]
+    estops = [e for e in result.get("event_log", []) if e["kind"] == "estop" and e.get("at") is not None]
+    out += [("estop", e["at"]) for e in estops[:MAX_ESTOP_STATES]]
+    return out
 
 
 def _json(name: str, log_dir: Path) -> list[str]:

@@ -1,5 +1,13 @@
 """What `sharedctl demo` measures: ground truth and telemetry recorded from Zenoh, the metrics
-computed from them, and the in-process sampled references the distributed run is compared with."""
+computed from them, and the in-process sampled references the distributed run is compared with.
+
+The run's clock: t = 0 is the instant the operator was granted the lease, as the controller
+reports it (`RobotState.lease_since`, on the controller's wall clock — this host's), carried to
+this process's monotonic clock; a controller that does not report it (wire 1.1) leaves the
+arrival of the first RobotState naming a holder. On that clock: a RobotState at its own `time`,
+an Event at its own `time` (`at` in the event log), a GroundTruth sample at the robot's
+simulation time mapped by the smallest arrival − simulation-time offset seen (the loopback
+transit, well under a millisecond)."""
 from __future__ import annotations
 
 import threading
@@ -23,20 +31,25 @@ class Recorder:
 
     feasible: object
     lock: threading.Lock = field(default_factory=threading.Lock)
-    truth: list = field(default_factory=list)        # (arrival, q, qd, inside, margin)
+    truth: list = field(default_factory=list)        # (arrival, q, qd, inside, margin, simulation time)
     states: list = field(default_factory=list)       # (arrival, RobotState)
     events: list = field(default_factory=list)
     rejected: int = 0
-    operator_start: float | None = None              # arrival of the first RobotState with the operator in control
+    operator_start: float | None = None              # the run's t = 0 (monotonic): the lease instant
+    lease_wall: float | None = None                  # the same instant on the controller's (wall) clock
+    run_clock: str | None = None                     # "lease" (reported by the controller) or "first_state"
+    truth_offset: float = float("inf")               # min over samples of arrival − simulation time
     in_control: threading.Event = field(default_factory=threading.Event)
 
     def on_truth(self, sample) -> None:
         msg = self._decode(sample, GroundTruth)
         if msg is not None:
+            now = time.monotonic()
             q = np.asarray(msg.q, float)
-            row = (time.monotonic(), q, np.asarray(msg.qd, float), self.feasible.contains(q), self.feasible.margin(q))
+            row = (now, q, np.asarray(msg.qd, float), self.feasible.contains(q), self.feasible.margin(q), msg.time)
             with self.lock:
                 self.truth.append(row)
+                self.truth_offset = min(self.truth_offset, now - msg.time)
 
     def on_state(self, sample) -> None:
         msg = self._decode(sample, RobotState)
@@ -45,8 +58,20 @@ class Recorder:
             with self.lock:
                 self.states.append((now, msg))
                 if self.operator_start is None and msg.lease_holder is not None:
-                    self.operator_start = now
+                    if msg.lease_since is not None:
+                        self.lease_wall = msg.lease_since
+                        self.operator_start = msg.lease_since - (time.time() - time.monotonic())
+                        self.run_clock = "lease"
+                    else:
+                        self.operator_start, self.run_clock = now, "first_state"
                     self.in_control.set()
+
+    def controller_time(self, wall: float, arrival: float) -> float:
+        """A controller message's own `time` (wall clock) on the run's clock; its arrival if t = 0 has no
+        wall-clock instant."""
+        if self.lease_wall is not None:
+            return wall - self.lease_wall
+        return arrival - (self.operator_start or 0.0)
 
     def on_event(self, sample) -> None:
         msg = self._decode(sample, Event)
@@ -93,7 +118,8 @@ def measure(rec: Recorder, start: float | None, duration: float) -> dict:
     for _, ev in events:
         kinds[ev.kind.value] = kinds.get(ev.kind.value, 0) + 1
     origin = start if start is not None else (events[0][0] if events else 0.0)
-    log = [{"t": round(a - origin, 3), "kind": ev.kind.value, "severity": ev.severity.value, "source": ev.source,
+    log = [{"t": round(a - origin, 3), "at": round(rec.controller_time(ev.time, a), 4) if start is not None else None,
+            "kind": ev.kind.value, "severity": ev.severity.value, "source": ev.source,
             "text": ev.text} for a, ev in events[:100]]
     times = [a for a, s in states if start is not None and start <= a <= end]
     origin_t = start if start is not None else (truth[0][0] if truth else 0.0)
@@ -120,7 +146,36 @@ def measure(rec: Recorder, start: float | None, duration: float) -> dict:
         "events": kinds,
         "event_log": log,
         "rejected_messages": rec.rejected,
+        "run_clock": rec.run_clock,
     }
+
+
+TRUTH_SPAN = 0.1      # s of ground truth kept either side of an instant (`states_at`)
+TORQUE_SPAN = 0.06    # s of reported wheel torques kept before it (three telemetry periods at 50 Hz)
+
+
+def states_at(rec: Recorder, instants: list[tuple[str, float]]) -> list[dict]:
+    """The ground truth and the controller's reported wheel torques around each (label, t) — t on the run's
+    clock, e.g. the instant a fault fired — for a forecast from the true state at that instant
+    (services/studies/campaign/stopping.py): `truth` rows [t, *q, *q̇] within ±TRUTH_SPAN, `torques` rows
+    [t, *τ] within TORQUE_SPAN before it, both on the run's clock."""
+    with rec.lock:
+        truth, states = list(rec.truth), list(rec.states)
+    if rec.operator_start is None:
+        return []
+    start, offset = rec.operator_start, rec.truth_offset
+    sim = [((row[5] + offset if len(row) > 5 and np.isfinite(offset) else row[0]) - start, row) for row in truth]
+    torques = [(rec.controller_time(msg.time, a), msg) for a, msg in states]
+    out = []
+    for label, t in instants:
+        out.append({
+            "what": label, "t": t,
+            "truth": [[round(ts, 5), *map(float, row[1]), *map(float, row[2])] for ts, row in sim
+                      if abs(ts - t) <= TRUTH_SPAN],
+            "torques": [[round(ts, 5), *map(float, msg.wheel_torques)] for ts, msg in torques
+                        if t - TORQUE_SPAN <= ts <= t],
+        })
+    return out
 
 
 def reference_run(scenario, controller: str | None, duration: float) -> dict:

@@ -33,7 +33,8 @@ gateway got round to reading it; ``buffer_wait_ms`` (mean/max) is that reading l
 One thread: `select` on both buses' sockets, drain each ready bus in a batch (non-blocking
 reads until empty, at most BATCH frames, through services/can_transport/), release what is due
 from a heap, babble when due.
-As `sharedctl fault-relay`, faults act from SIGUSR1 on (``--arm-on-signal``), counters go to
+As `sharedctl fault-relay`, faults act from SIGUSR1 on (``--arm-on-signal``; windows count from the
+run's t = 0 read from ``--origin-file``), counters go to
 ``--stats FILE`` at exit, including the gateway's CPU time and the frame rate it handled.
 """
 from __future__ import annotations
@@ -55,7 +56,7 @@ from ..lifecycle import StopFlag
 from ..can_transport import Frame, transport_for
 from .impairments import Pipeline
 from .spec import FaultPlan, FaultSpecError, parse, pipeline
-from .zenoh_relay import add_fault_arguments, write_stats
+from .zenoh_relay import add_fault_arguments, add_origin_argument, origin_monotonic, write_stats
 
 COMMAND_CMDS = frozenset({0x02, 0x07, 0x0B, 0x0D, 0x0E, 0x0F, 0x18})    # host → drive (data frames)
 FEEDBACK_CMDS = frozenset({0x01, 0x03, 0x09, 0x14, 0x17, 0x1C})         # drive → host (data frames)
@@ -124,7 +125,8 @@ class CanGateway:
         self.heap: list = []
         self.order = itertools.count()
         self.t0: float | None = None
-        self.armed_wall: float | None = None      # time.time() of the arming (run start), for alignment
+        self.armed_wall: float | None = None      # time.time() of the run's t = 0, for alignment
+        self.armed_late: float | None = None      # s after t = 0 the faults were armed (impairments act from then)
         self.echo_ignored = 0
         self.unknown = 0
         self.babble_sent = 0
@@ -135,10 +137,12 @@ class CanGateway:
         self.started = time.monotonic()
         self.cpu_start = time.process_time()
 
-    def arm(self) -> None:
+    def arm(self, origin: float | None = None) -> None:
+        """Faults act from now on; `origin` (monotonic, default now) is the run's t = 0 (windows count from it)."""
         if self.t0 is None:
-            self.t0 = time.monotonic()
-            self.armed_wall = time.time()
+            now = time.monotonic()
+            self.t0 = now if origin is None else min(origin, now)
+            self.armed_wall, self.armed_late = time.time() - (now - self.t0), now - self.t0
 
     # ----- the loop --------------------------------------------------------------
     def run(self, stop: StopFlag, deadline: float | None = None) -> None:
@@ -240,6 +244,7 @@ class CanGateway:
         cpu = time.process_time() - self.cpu_start
         frames = sum(s.received for s in self.streams.values())
         return {"kind": "can-gateway", "armed": self.t0 is not None, "armed_wall": self.armed_wall,
+                "armed_late_s": self.armed_late,
                 "realtime": self.realtime,
                 "ids": list(self.link.ids),
                 "command": self.streams["command"].report(), "feedback": self.streams["feedback"].report(),
@@ -265,6 +270,7 @@ def add_parser(subparsers) -> None:
     p.add_argument("--robot-channel", help="socketcan: the robot's interface (e.g. vcan1)")
     add_fault_arguments(p)
     p.add_argument("--arm-on-signal", action="store_true", help="faults act from SIGUSR1 on (default: from the start)")
+    add_origin_argument(p)
     p.add_argument("--stats", metavar="FILE", help="write the counters as JSON here at exit (default: stdout)")
     p.add_argument("--ready", metavar="FILE", help="create FILE once both buses are open")
     p.add_argument("--duration", type=float, metavar="S", help="exit after S seconds (a backstop)")
@@ -303,7 +309,7 @@ def run(args) -> int:
         return 1
     gateway = CanGateway(buses[0], buses[1], plan)
     gateway.realtime = make_loop_realtime() if args.realtime else False
-    signal.signal(signal.SIGUSR1, lambda *_: gateway.arm())
+    signal.signal(signal.SIGUSR1, lambda *_: gateway.arm(origin_monotonic(args.origin_file)))
     if not args.arm_on_signal:
         gateway.arm()
     if args.ready:

@@ -1,6 +1,6 @@
 """Fault specifications: ``STREAM.KEY=VALUE`` strings → a validated :class:`FaultPlan` (pure).
 
-Link streams (times in seconds from the run's start, probabilities in [0, 1] or a percentage
+Link streams (times in seconds from the run's t = 0, probabilities in [0, 1] or a percentage
 such as ``50%``; every key may be given once, except the windows, which add up):
 
 =============================  =================================================================
@@ -28,7 +28,10 @@ at HZ ≤ 5000 frames/s on both buses; for the whole run unless a window is give
 
 Process faults: ``controller|console|robot.kill_at=SEC`` (SIGKILL), ``….stop_at=SEC,DURATION``
 (SIGSTOP, SIGCONT DURATION later), ``controller.restart_at=SEC`` (a fresh controller, after a
-kill). ``seed=N`` sets the seed (``--fault-seed`` otherwise; default 0).
+kill), ``operator.estop_at=SEC`` (an operator's emergency stop: an OperatorCommand with ``estop``
+set, sent straight to the controller from a session of its own — the controller honours an
+estop from anyone). SEC counts from the run's t = 0, the instant the operator was granted the
+lease as the controller reports it. ``seed=N`` sets the seed (``--fault-seed`` otherwise; default 0).
 
 A bad spec raises :class:`FaultSpecError`, which names the key and the value.
 """
@@ -84,9 +87,9 @@ class LinkFaults:
 
 @dataclass(frozen=True)
 class ProcessFault:
-    target: str          # controller | console | robot
-    action: str          # kill | stop | restart
-    at: float            # s from the run's start
+    target: str          # controller | console | robot | operator (estop)
+    action: str          # kill | stop | restart | estop
+    at: float            # s from the run's t = 0 (the lease instant)
     duration: float = 0.0
 
     def describe(self) -> str:
@@ -199,7 +202,7 @@ def _set_link(spec: str, link: LinkFaults, stream: str, key: str, value: str) ->
         link.babble = (hz, can_id, start, duration)
     else:
         known = "delay_ms, jitter_ms, jitter, loss, burst, blackout, duplicate, reorder, corrupt, rate, replay"
-        known += ", ids, busoff, babble" if stream == "can" else ""
+        known += ", ids, busoff, babble" if stream == "can" else ", estop_at" if stream == "operator" else ""
         raise FaultSpecError(spec, f"unknown key {stream}.{key} (known: {known})")
     link.given.add(key)
 
@@ -233,7 +236,9 @@ def parse(specs: list[str], seed: int | None = None) -> FaultPlan:
         target, dot, name = key.partition(".")
         if not dot or not name:
             raise FaultSpecError(spec, f"expected STREAM.KEY with STREAM one of {', '.join(LINKS + PROCESSES)}")
-        if target in LINKS:
+        if target == "operator" and name == "estop_at":
+            plan.processes.append(ProcessFault("operator", "estop", _number(spec, value, "SEC")))
+        elif target in LINKS:
             _set_link(spec, plan.links[target], target, name, value)
         elif target in PROCESSES:
             _add_process(spec, plan, target, name, value)

@@ -9,12 +9,19 @@ the demo is exactly the unimpaired one.
 * ``can.*`` faults: the controller and the robot get two different host-local udp_multicast
   ports and a `sharedctl fault-gateway` child forwards between them.
 * process faults (``controller|console|robot.kill_at`` / ``stop_at``, ``controller.restart_at``)
-  are carried out by the demo's supervision loop at the given time from the run's start
-  (the first RobotState with the operator in control), by PID, only on the demo's own
-  children. A stopped child is always continued (SIGCONT) before the demo stops it.
+  are carried out by the demo's supervision loop, by PID, only on the demo's own children; a
+  stopped child is always continued (SIGCONT) before the demo stops it. ``operator.estop_at``
+  is an OperatorCommand with ``estop`` set that the demo's own session sends to the controller.
 
-Faults act from the run's start on: the relay and gateway forward unimpaired until the demo
-sends them SIGUSR1, so every run starts the same way.
+The run's clock: t = 0 is the instant the operator was granted the lease, as the controller
+reports it (``RobotState.lease_since``, wire 1.2) — not when the demo's session first heard of
+it, one telemetry period or more later. Every timed fault is due at its SEC on that clock; the
+supervision loop sleeps until the next one is due (never longer than its 50 ms poll), so a fault
+fires within SCHEDULING_TOLERANCE of its time unless the demo learnt t = 0 only after it. The
+instant each one actually fired (at the signal or the put, on the run's clock) is reported as
+``done_at`` with ``late_by`` = done_at − SEC. The relay and gateway forward unimpaired until the
+demo sends them SIGUSR1; before it, the demo writes t = 0 (wall clock) to their origin file, so
+their windows (blackouts, bus-off) open on the same clock.
 
 How a run with intended faults is judged (``ok``): the run started (the operator got control,
 and no emergency stop came before the faults were armed), the simulator's ground truth shows
@@ -37,6 +44,9 @@ from ..children import raise_priority
 from .spec import FaultPlan, ProcessFault, parse
 
 READY_TIMEOUT = 15.0
+POLL = 0.05                    # s, the supervision loop's period when no fault is due sooner
+SCHEDULING_TOLERANCE = 0.005   # s a fault may fire after its time (the demo's wake-up and the signal/put)
+ESTOP_OPERATOR = "fault-estop"  # operator id of the injected estop commands
 
 
 def add_arguments(p) -> None:
@@ -51,14 +61,15 @@ class Injection:
     """One process fault as carried out."""
 
     fault: ProcessFault
-    done_at: float | None = None       # s from the run's start
+    done_at: float | None = None       # s on the run's clock: when the signal (or the estop) went out
     pid: int | None = None
     continued_at: float | None = None  # stop_at: when SIGCONT was sent
     skipped: str | None = None
 
     def report(self) -> dict:
+        late = None if self.done_at is None else round(self.done_at - self.fault.at, 6)
         return {"fault": self.fault.describe(), "target": self.fault.target, "action": self.fault.action,
-                "planned_at": self.fault.at, "done_at": self.done_at, "pid": self.pid,
+                "planned_at": self.fault.at, "done_at": self.done_at, "late_by": late, "pid": self.pid,
                 "continued_at": self.continued_at, "skipped": self.skipped}
 
 
@@ -73,9 +84,16 @@ class FaultStack:
     killed: dict = field(default_factory=dict)           # name -> the Child that was killed on purpose
     stopped: dict = field(default_factory=dict)          # name -> (Child, injection)
     killed_reports: list = field(default_factory=list)
-    armed_at: float | None = None
+    armed_at: float | None = None                        # s on the run's clock when the demo armed the faults
     gateway_priority: str | None = None
-    t0: float | None = None
+    t0: float | None = None                              # the run's t = 0, monotonic
+    origin_file: Path | None = None                      # where t = 0 goes for the relay and the gateway
+    estop_sender: object = None                          # callable that sends an estop command, or None
+    clock: object = time.monotonic                       # the monotonic clock the faults are timed on
+
+    @property
+    def has_estops(self) -> bool:
+        return any(f.action == "estop" for f in self.plan.processes)
 
     @classmethod
     def from_args(cls, args) -> "FaultStack":
@@ -108,11 +126,14 @@ class FaultStack:
 
     def fault_argv(self) -> list[str]:
         argv = [a for spec in self.plan.specs for a in ("--fault", spec)]
-        return argv + ["--fault-seed", str(self.plan.seed), "--arm-on-signal"]
+        argv += ["--fault-seed", str(self.plan.seed), "--arm-on-signal"]
+        return argv + (["--origin-file", str(self.origin_file)] if self.origin_file is not None else [])
 
     def start(self, controller_ep: str, robot_id: str, log_dir: Path,
               backstop: str, start_child, wait_listening) -> None:
         """Start the relay and/or the gateway (before the robot, console and controller)."""
+        self.origin_file = log_dir / "fault-origin.json"
+        self.origin_file.unlink(missing_ok=True)
         if self.can_ports is not None:
             stats, ready = log_dir / "fault-gateway.json", log_dir / "fault-gateway.ready"
             self.stats_files["gateway"] = stats
@@ -138,18 +159,58 @@ class FaultStack:
                 raise RuntimeError(f"the Zenoh fault relay did not come up on {self.relay_endpoint}")
 
     # ----- during the run ------------------------------------------------------
-    def arm(self, t0: float) -> None:
-        """The run has started (monotonic `t0`): faults act from now on."""
+    def attach(self, session, robot_id: str) -> None:
+        """The demo's own session: `operator.estop_at` faults are sent on it, straight to the controller."""
+        if not self.has_estops:
+            return
+        from sharedctl.protocol import keys
+        from sharedctl.protocol.messages import ControlRequest, OperatorCommand
+        from sharedctl.protocol.msgpack_codec import encode_message
+
+        publisher = session.declare_publisher(keys.operator_cmd_key(robot_id))
+        session_id = f"estop-{os.getpid()}"
+        seq = iter(range(1, 1 << 30))
+        zeros = (0.0, 0.0, 0.0)
+
+        def send() -> None:
+            publisher.put(encode_message(OperatorCommand(
+                operator_id=ESTOP_OPERATOR, session_id=session_id, seq=next(seq), send_time=time.time(),
+                joystick=zeros, q_d=zeros, qd_d=zeros, qdd_d=zeros, deadman=False, estop=True,
+                control_request=ControlRequest.NONE)))
+        self.estop_sender = send
+
+    def arm(self, t0: float, lease_wall: float | None = None) -> None:
+        """The run's t = 0 is `t0` (monotonic; `lease_wall`: the same instant on the wall clock, for the
+        relay and the gateway): faults act from now on, timed ones on that clock."""
         if self.t0 is not None:
             return
         self.t0 = t0
+        if self.origin_file is not None and self.infra:
+            wall = lease_wall if lease_wall is not None else time.time() - (self.clock() - t0)
+            tmp = self.origin_file.with_suffix(".tmp")
+            tmp.write_text(json.dumps({"lease_wall": wall}))
+            tmp.replace(self.origin_file)
         for child in self.infra.values():
             if child.popen.poll() is None:
                 child.popen.send_signal(signal.SIGUSR1)
-        self.armed_at = time.monotonic() - t0
+        self.armed_at = self.clock() - t0
 
     def expected_dead(self, name: str) -> bool:
         return name in self.killed
+
+    def next_due(self) -> float | None:
+        """The monotonic instant the next process fault (or SIGCONT) is due; None if none is pending."""
+        if self.t0 is None:
+            return None
+        times = [inj.fault.at for inj in self.injections if inj.done_at is None and inj.skipped is None]
+        times += [inj.fault.at + inj.fault.duration for inj in self.injections
+                  if inj.fault.action == "stop" and inj.done_at is not None and inj.continued_at is None]
+        return self.t0 + min(times) if times else None
+
+    def wait_time(self, now: float) -> float:
+        """How long the supervision loop may sleep at `now`: POLL, or less if a fault is due sooner."""
+        due = self.next_due()
+        return POLL if due is None else min(POLL, max(due - now, 0.0))
 
     def tick(self, now: float, children: dict, restart) -> str | None:
         """Carry out the process faults that are due; returns a failure reason if the relay/gateway died."""
@@ -158,34 +219,48 @@ class FaultStack:
         t = now - self.t0
         for inj in self.injections:
             if inj.done_at is None and inj.skipped is None and t >= inj.fault.at:
-                self._inject(inj, t, children, restart)
+                self._inject(inj, children, restart)
             if inj.fault.action == "stop" and inj.done_at is not None and inj.continued_at is None \
                     and t >= inj.fault.at + inj.fault.duration:
-                self._continue(inj, t)
+                self._continue(inj, self._clock())
         dead = [name for name, child in self.infra.items() if child.popen.poll() is not None]
         return f"the fault {', '.join(dead)} exited during the run" if dead else None
 
-    def _inject(self, inj: Injection, t: float, children: dict, restart) -> None:
+    def _clock(self) -> float:
+        """Now on the run's clock (s since t = 0)."""
+        return self.clock() - self.t0
+
+    def _inject(self, inj: Injection, children: dict, restart) -> None:
         name, action = inj.fault.target, inj.fault.action
+        if action == "estop":
+            if self.estop_sender is None:
+                inj.skipped = "no session to send the estop on"
+                return
+            inj.done_at = self._clock()
+            self.estop_sender()
+            return
         if action == "restart":
             if name not in self.killed:
                 inj.skipped = "not killed"
                 return
+            inj.done_at = self._clock()
             children[name] = restart()
-            inj.pid, inj.done_at = children[name].popen.pid, t
+            inj.pid = children[name].popen.pid
             del self.killed[name]
             return
         child = children.get(name)
         if child is None or child.popen.poll() is not None:
             inj.skipped = "not running"
             return
-        inj.pid, inj.done_at = child.popen.pid, t
+        inj.pid = child.popen.pid
         if action == "kill":
+            inj.done_at = self._clock()
             child.popen.kill()       # SIGKILL to our own child, by PID
             child.popen.wait()
             self.killed[name] = child
             self._record_killed(name, child)
         else:
+            inj.done_at = self._clock()
             os.kill(child.popen.pid, signal.SIGSTOP)
             self.stopped[name] = (child, inj)
 
@@ -202,7 +277,7 @@ class FaultStack:
 
     def continue_all(self) -> None:
         """SIGCONT every child still stopped (before the demo stops them)."""
-        now = None if self.t0 is None else time.monotonic() - self.t0
+        now = None if self.t0 is None else self._clock()
         for inj in [i for i in self.injections if i.fault.action == "stop" and i.done_at is not None
                     and i.continued_at is None]:
             self._continue(inj, now)
@@ -214,7 +289,7 @@ class FaultStack:
             child.stop(5.0)
 
     def report(self) -> dict:
-        out: dict = {"seed": self.plan.seed, "armed_at": self.armed_at,
+        out: dict = {"seed": self.plan.seed, "armed_at": self.armed_at, "scheduling_tolerance": SCHEDULING_TOLERANCE,
                      "processes": [inj.report() for inj in self.injections],
                      "killed": self.killed_reports}
         for name, path in self.stats_files.items():

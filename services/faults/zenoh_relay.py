@@ -19,10 +19,13 @@ Each session subscribes with ``allowed_origin=REMOTE`` and only republishes on t
 session, so the relay never hears its own publications. The ground-truth stream and the
 demo's own measurements do not pass through the relay.
 
-Faults are armed at the run's start: SIGUSR1 (sent by `sharedctl demo` when the operator first
-holds control), or at once without ``--arm-on-signal``. Until then messages pass unimpaired,
-so every run starts the same way. Arrival times given to the pipeline are seconds from the
-arming. A scheduler thread releases each message at its release time.
+Faults are armed at the run's start: SIGUSR1 (sent by `sharedctl demo` once it has heard from the
+controller that the operator holds control), or at once without ``--arm-on-signal``. Until then
+messages pass unimpaired, so every run starts the same way. Arrival times given to the pipeline
+are seconds from the run's t = 0: the instant the operator was granted the lease, which the demo
+writes (wall-clock seconds) to ``--origin-file`` before it signals (without one, the arming is
+t = 0). Timed windows (blackouts) thus open on the run's own clock, not when the demo heard of
+it. A scheduler thread releases each message at its release time.
 
 At exit (SIGTERM/SIGINT) the counters are written as JSON (``--stats FILE``): per direction the
 pipeline's counters (received, lost, burst_lost, blackout_dropped, duplicated, corrupted,
@@ -50,6 +53,21 @@ from .impairments import Pipeline
 from .spec import FaultSpecError, parse, pipeline
 
 QUERY_TIMEOUT = 2.0     # s a forwarded lease query waits for the controller
+MAX_ORIGIN_AGE = 5.0    # s: an origin further back than this (or in the future) is not this run's; arming is t = 0
+
+
+def origin_monotonic(path: str | None) -> float:
+    """The run's t = 0 on this process's monotonic clock: the wall-clock instant in `path` (a JSON
+    ``{"lease_wall": S}`` written by the demo before it arms), else now. Same host, one clock pair."""
+    now = time.monotonic()
+    if not path:
+        return now
+    try:
+        wall = float(json.loads(Path(path).read_text())["lease_wall"])
+    except (OSError, ValueError, KeyError, TypeError):
+        return now
+    age = time.time() - wall
+    return now - age if 0.0 <= age <= MAX_ORIGIN_AGE else now
 
 
 class Direction:
@@ -86,6 +104,7 @@ class ZenohRelay:
         self.order = itertools.count()
         self.seq = {"operator": itertools.count(), "telemetry": itertools.count()}
         self.t0: float | None = None
+        self.armed_late: float | None = None      # s after t = 0 the faults were armed
         self.running = False
         self.sessions: dict[str, zenoh.Session] = {}
         self.entities: list = []
@@ -118,11 +137,13 @@ class ZenohRelay:
         self.thread.start()
         return self
 
-    def arm(self) -> None:
-        """Faults act from now on (the run's start)."""
+    def arm(self, origin: float | None = None) -> None:
+        """Faults act from now on; `origin` (monotonic, default now) is the run's t = 0."""
         with self.cond:
             if self.t0 is None:
-                self.t0 = time.monotonic()
+                now = time.monotonic()
+                self.t0 = now if origin is None else min(origin, now)
+                self.armed_late = now - self.t0
 
     def stop(self) -> None:
         with self.cond:
@@ -141,6 +162,7 @@ class ZenohRelay:
     def report(self) -> dict:
         with self.cond:
             return {"kind": "zenoh-relay", "listen": self.listen, "connect": self.connect, "armed": self.t0 is not None,
+                    "armed_late_s": self.armed_late,
                     "pending": len(self.heap), "queries": dict(self.queries),
                     **{name: d.report() for name, d in self.directions.items()}}
 
@@ -237,9 +259,16 @@ def add_parser(subparsers) -> None:
     p.add_argument("--robot-id", default="robot1")
     add_fault_arguments(p)
     p.add_argument("--arm-on-signal", action="store_true", help="faults act from SIGUSR1 on (default: from the start)")
+    add_origin_argument(p)
     p.add_argument("--stats", metavar="FILE", help="write the counters as JSON here at exit (default: stdout)")
     p.add_argument("--duration", type=float, metavar="S", help="exit after S seconds (a backstop)")
     p.set_defaults(handler=run)
+
+
+def add_origin_argument(p) -> None:
+    p.add_argument("--origin-file", metavar="FILE",
+                   help='with --arm-on-signal: on SIGUSR1 read the run\'s t = 0 from FILE ({"lease_wall": S}, '
+                        "wall-clock s); timed windows count from it (default: from the signal)")
 
 
 def write_stats(report: dict, path: str | None) -> None:
@@ -262,7 +291,7 @@ def run(args) -> int:
     except (FaultSpecError, EndpointError, ValueError) as exc:
         print(f"sharedctl fault-relay: {exc}", file=sys.stderr)
         return 2
-    signal.signal(signal.SIGUSR1, lambda *_: relay.arm())
+    signal.signal(signal.SIGUSR1, lambda *_: relay.arm(origin_monotonic(args.origin_file)))
     if not args.arm_on_signal:
         relay.arm()
     relay.start()

@@ -125,3 +125,16 @@ def test_a_malformed_query_gets_a_refusal_not_an_exception():
                  encode_message(LeaseReply(request_seq=1, time=1.0, granted=True, holder=None, reason=""))):
         assert not ask(lease, guard, rejections, junk, 0.0).granted
     assert sum(rejections.values()) == 3 and all(k.startswith("lease_") for k in rejections)
+
+
+def test_holder_since_is_the_grant_instant_and_renewals_keep_it():
+    lease = OperatorLease(expiry=1.0)
+    assert lease.holder_since is None
+    assert lease.admit_command("alice", "a1", NONE, 5.0) is None      # implicit take
+    lease.admit_command("alice", "a1", NONE, 5.5)                     # renewals
+    lease.request("alice", "a1", TAKE, 5.9)
+    assert lease.holder_since == 5.0
+    lease.update(7.0)                                                  # expired
+    assert lease.holder_since is None
+    lease.request("bob", "b1", TAKE, 7.2)
+    assert lease.holder_since == 7.2

@@ -226,6 +226,17 @@ def test_robot_state_is_published_with_the_link_health(daemon):
     assert math.isclose(state.k_s, 1.0) and not state.estop_active
 
 
+def test_robot_state_reports_when_the_holder_was_granted_the_lease_on_its_wall_clock(daemon):
+    arm(daemon)
+    operator(daemon, 1, 10.003)                                   # the implicit take, at monotonic 10.003
+    operator(daemon, 2, 10.004)                                   # a renewal
+    feed(daemon, 10.004, heartbeat=False)
+    daemon.tick(10.005)
+    daemon.telemetry.publish_state(10.005)
+    state = decode_message(daemon.session.publishers["sharedctl/v1/unit/state"].payloads[-1], expect=RobotState)
+    assert state.lease_since == pytest.approx(10.003 + time.time() - time.monotonic(), abs=0.01)
+
+
 def test_robot_state_in_three_stages_sends_what_was_captured_in_its_first(daemon):
     """A RobotState's stage 0 captures (and works out q_r), 1 builds, 2 puts (telemetry_schedule.py): one message,
     with the values of the period that captured it, whatever the ticks between the stages change; the same as

@@ -74,3 +74,62 @@ def test_without_friction_the_robot_plant_reference_is_the_model_plant_reference
     robot_plant = plant_reference_run(scenario, None, 2.0)
     assert np.allclose(robot_plant["final_pose"], model_plant["final_pose"], atol=2e-3)
     assert robot_plant["human_authority"] == pytest.approx(model_plant["human_authority"])
+
+
+class _Payload:
+    def __init__(self, data: bytes) -> None:
+        self.data = data
+
+    def to_bytes(self) -> bytes:
+        return self.data
+
+
+class _Sample:
+    """A Zenoh sample as the Recorder's callbacks see it."""
+
+    def __init__(self, message) -> None:
+        from sharedctl.protocol.msgpack_codec import encode_message
+        self.payload = _Payload(encode_message(message))
+
+
+def test_the_runs_t0_is_the_lease_instant_the_controller_reports_not_the_first_states_arrival():
+    import dataclasses
+    import time
+
+    rec = Recorder(load("paper_convex").closed_loop()[0].feasible)
+    granted = time.time() - 0.4                                    # the controller granted the lease 0.4 s ago
+    rec.on_state(_Sample(dataclasses.replace(state((0.0, 2.0, 0.0), (0.0, 2.0, 0.0), Authority.HUMAN),
+                                             lease_since=granted)))
+    assert rec.run_clock == "lease" and rec.lease_wall == granted
+    assert time.monotonic() - rec.operator_start == pytest.approx(0.4, abs=0.05)
+
+
+def test_without_a_reported_lease_instant_the_first_state_naming_a_holder_starts_the_clock():
+    import time
+
+    rec = Recorder(load("paper_convex").closed_loop()[0].feasible)
+    rec.on_state(_Sample(state((0.0, 2.0, 0.0), (0.0, 2.0, 0.0), Authority.HUMAN)))
+    assert rec.run_clock == "first_state" and time.monotonic() - rec.operator_start == pytest.approx(0.0, abs=0.05)
+
+
+def test_states_at_puts_the_ground_truth_on_the_runs_clock_by_simulation_time():
+    import dataclasses
+
+    from sharedctl.services.demo.measure import states_at
+
+    rec = Recorder(load("paper_convex").closed_loop()[0].feasible)
+    rec.operator_start, rec.lease_wall = 50.0, 1000.0              # t = 0: monotonic 50 s, wall 1000 s
+    transit = [0.004, 0.0005, 0.02, 0.001]                         # arrival − simulation time: 0.5 ms at best
+    for k, lag in enumerate(transit):
+        sim = 11.98 + 0.01 * k                                     # the robot's clock: monotonic 40 s at 0
+        q = np.array([0.0, 2.0 + 0.01 * k, 0.0])
+        rec.truth.append((40.0 + sim + lag, q, np.array([0.0, 1.0, 0.0]), True, 1.0, sim))
+        rec.truth_offset = min(rec.truth_offset, 40.0 + lag)
+    for wall, torque in ((1001.95, 0.5), (1001.99, 0.7), (1002.02, 0.9)):
+        rec.states.append((0.0, dataclasses.replace(state((0.0, 2.0, 0.0), (0.0, 2.0, 0.0), Authority.HUMAN),
+                                                    time=wall, wheel_torques=(torque, 0.0, 0.0))))
+    entry, = states_at(rec, [("controller.kill_at=2", 2.0)])
+    assert [row[0] for row in entry["truth"]] == pytest.approx([1.9805, 1.9905, 2.0005, 2.0105])
+    assert entry["truth"][2][1:4] == pytest.approx([0.0, 2.02, 0.0])
+    assert [row[0] for row in entry["torques"]] == pytest.approx([1.95, 1.99])   # before the instant only
+    assert entry["torques"][-1][1] == 0.7

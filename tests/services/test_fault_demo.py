@@ -50,3 +50,27 @@ def test_demo_refuses_a_bad_fault_spec():
     proc = subprocess.run([sys.executable, "-m", "sharedctl.services.cli", "demo", "--headless",
                            "--fault", "operator.loss=2"], capture_output=True, timeout=60)
     assert proc.returncode == 2 and b"operator.loss=2" in proc.stderr
+
+
+def test_a_timed_fault_fires_at_its_time_after_the_lease_on_the_controllers_own_clock(tmp_path):
+    """An operator's estop at 1.2 s: the controller's own estop event, on its own clock less the lease
+    instant it reports, lands within one control period plus the stack's scheduling tolerance of 1.2 s
+    (the demo learns t = 0 one telemetry period or more after it); the JSON keeps the ground truth
+    around the instant for the campaign's forecast."""
+    from sharedctl.services.faults.stack import SCHEDULING_TOLERANCE
+
+    period = 0.002
+    out = tmp_path / "demo.json"
+    argv = [sys.executable, "-m", "sharedctl.services.cli", "demo", "--scenario", "adversarial_wall", "--headless",
+            "--duration", "2", "--no-reference", "--json", str(out), "--log-dir", str(tmp_path / "logs"),
+            "--fault", "operator.estop_at=1.2"]
+    proc = subprocess.run(argv, capture_output=True, timeout=120)
+    summary = json.loads(out.read_text())
+    assert summary["run_clock"] == "lease", proc.stderr.decode()[-2000:]
+    fired, = summary["injected"]["processes"]
+    assert 0.0 <= fired["done_at"] - 1.2 <= SCHEDULING_TOLERANCE
+    estop = next(e for e in summary["event_log"] if e["kind"] == "estop")
+    assert 1.2 <= estop["at"] <= 1.2 + period + SCHEDULING_TOLERANCE
+    state = next(s for s in summary["fault_states"] if s["what"] == "operator.estop_at=1.2")
+    times = [row[0] for row in state["truth"]]
+    assert min(times) < fired["done_at"] < max(times) and state["torques"]

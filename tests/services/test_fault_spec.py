@@ -51,6 +51,13 @@ def test_process_faults_sorted_by_time():
                               ProcessFault("controller", "kill", 5), ProcessFault("controller", "restart", 6)]
 
 
+def test_an_operator_estop_is_a_timed_process_fault_that_needs_no_relay():
+    plan = parse(["operator.estop_at=2.4", "operator.delay_ms=300"])
+    assert plan.processes == [ProcessFault("operator", "estop", 2.4)]
+    assert plan.processes[0].describe() == "operator.estop_at=2.4"
+    assert not parse(["operator.estop_at=2.4"]).has("operator")     # the demo sends it, not the relay
+
+
 def test_seed_from_the_option_or_a_spec():
     assert parse([], seed=7).seed == 7
     assert parse(["seed=11"], seed=7).seed == 11
@@ -61,6 +68,7 @@ def test_seed_from_the_option_or_a_spec():
 @pytest.mark.parametrize("spec,names", [
     ("operator.loss=1.5", "operator.loss=1.5"),
     ("operator.loss=abc", "abc"),
+    ("operator.estop_at=-1", "-1"),
     ("operator.loss=nan", "nan"),
     ("operator.delay_ms=-5", "-5"),
     ("operator.color=red", "operator.color"),

@@ -1,8 +1,8 @@
 """`sharedctl faults campaign [--quick] [--json OUT] [--report DIR]` — the fault campaign.
 
-Runs the matrix of services/faults/campaign.py one `sharedctl demo --fault …` at a time (this
-host has two cores: runs never overlap), judges each on the simulator's ground truth and
-against the safety policy (docs/safety.md), shows a progress bar, and writes the JSON
+Runs the matrix (matrix.py) one `sharedctl demo --fault …` at a time (this host has two cores:
+runs never overlap), judges each on the simulator's ground truth and against the forecasts of
+what its faults force (judge.py, docs/safety.md), shows a progress bar, and writes the JSON
 (`runs`, `violations`, `min_margin`, `rows`, …; rewritten after every run, so an interrupted
 campaign keeps what it measured) and the report (markdown table and plots). SIGINT/SIGTERM
 stop it after the current run. Exit 0 only if every run was measured and no violation falls
@@ -19,6 +19,7 @@ from datetime import datetime, timezone
 from pathlib import Path
 
 from sharedctl.services.lifecycle import StopFlag
+from . import judge as jd
 from . import matrix as cp
 
 
@@ -45,49 +46,41 @@ def add_parser(subparsers) -> None:
 
 
 class Forecasts:
-    """Stopping-distance forecasts on the robot's true plant, one sampled loop per scenario and law (cached)."""
-
-    HORIZON = 8.0   # s of loop simulated per scenario
-    WINDOW = 0.1    # s either side of the fault time over which the worst coast is taken
+    """The judge's forecasts (judge.py) on the robot's true plant, cached per scenario and law."""
 
     def __init__(self) -> None:
-        self.loops: dict = {}
+        self.plants: dict = {}
         self.delays: dict = {}
 
     def delay(self, scenario: str, duration: float, controller: str | None, loop_delay: float, hang=None) -> dict:
-        """Min margin of the sampled loop with the torque loop delayed by loop_delay (+ up to 2 periods), or
-        with the controller hung over `hang` = (START, DURATION) (the worst start within ±WINDOW)."""
+        """Min margin of the in-process sampled loop with the torque loop delayed by loop_delay (and by two
+        periods more: the distributed loop's rounding), or with the controller hung over `hang` = (START,
+        DURATION) at its actual instant; `best_min_margin` is the better of the runs."""
         from sharedctl.services.scenario_files import load
         from . import stopping
 
         key = (scenario, controller, round(loop_delay, 4), duration, hang)
         if key not in self.delays:
-            if hang is None:
-                runs = [(loop_delay + extra, None) for extra in (0.0, 2 * stopping.CONTROL_PERIOD)]
-            else:
-                runs = [(loop_delay, (hang[0] + dt, hang[1])) for dt in (0.0, -self.WINDOW, self.WINDOW)]
-            margins = [stopping.delayed_loop_margin(load(scenario), duration, lag, controller, hang=h)[0]
-                       for lag, h in runs]
+            lags = (loop_delay, loop_delay + 2 * stopping.CONTROL_PERIOD) if hang is None else (loop_delay,)
+            margins = [stopping.delayed_loop_margin(load(scenario), duration, lag, controller, hang=hang)[0]
+                       for lag in lags]
             self.delays[key] = {"loop_delay": loop_delay, "hang": hang, "min_margin": round(margins[0], 4),
-                                "worst_min_margin": round(min(margins), 4)}
+                                "best_min_margin": round(max(margins), 4)}
         return self.delays[key]
 
-    def coast(self, scenario: str, duration: float, controller: str | None, t_fault: float, hold: float) -> dict:
-        from sharedctl.services.scenario_files import load
+    def coast(self, scenario: str, controller: str | None, state: dict, holds) -> dict | None:
+        """A loss of actuation forecast from the run's ground truth at the instant it happened (`state`: a
+        `fault_states` entry of the demo's JSON), the best over the held torques and `holds`."""
         from . import stopping
 
         key = (scenario, controller)
-        if key not in self.loops:
-            self.loops[key] = stopping.sampled_loop(load(scenario), max(self.HORIZON, duration), controller)
-        samples, plant, feasible = self.loops[key]
-        out = stopping.forecast(samples, plant, feasible, t_fault, hold)
-        result = {k: round(float(v), 4) for k, v in vars(out).items()}
-        # the distributed run's clock is not the loop's to the millisecond: the worst coast within ±WINDOW
-        nearby = [stopping.forecast(samples, plant, feasible, t_fault + dt, hold).min_margin
-                  for dt in (-self.WINDOW, -self.WINDOW / 2, self.WINDOW / 2, self.WINDOW)]
-        result["worst_min_margin"] = round(float(min([out.min_margin, *nearby])), 4)
-        result["window"] = self.WINDOW
-        return result
+        if key not in self.plants:
+            from sharedctl.services.scenario_files import load
+            self.plants[key] = stopping.true_plant(load(scenario), controller)
+        plant, feasible = self.plants[key]
+        out = stopping.forecast_at(plant, feasible, state["truth"], state.get("torques") or [], state["t"],
+                                   tuple(holds))
+        return None if out is None else {k: round(float(v), 4) for k, v in vars(out).items()}
 
 
 def run(args) -> int:
@@ -143,9 +136,9 @@ def run(args) -> int:
 
         def on_row(row, done, total):
             rows.append(row)
-            agg = cp.aggregate(rows, meta)
+            agg = jd.aggregate(rows, meta)
             if json_out is not None:
-                cp.write_json(json_out, agg)
+                jd.write_json(json_out, agg)
             if row["violations"] or row["outcome"] == "error":
                 progress.console.print(f"  {row['outcome']}: {row['id']} (min margin {row['min_margin']}; "
                                        f"{row['explained'] or row['error'] or row['failure'] or 'unexplained'})")
@@ -156,10 +149,10 @@ def run(args) -> int:
 
         cp.run_campaign(cases, runner, Forecasts(), on_row, should_stop, max(args.retries, 0))
     meta["load_after"] = _load()
-    result = cp.aggregate(rows, meta)
+    result = jd.aggregate(rows, meta)
     result["interrupted"] = len(rows) < len(kept) + len(cases)
     if json_out is not None:
-        cp.write_json(json_out, result)
+        jd.write_json(json_out, result)
     if args.report:
         from .report import write_report
         write_report(result, Path(args.report), "Fault campaign" + (" (quick)" if args.quick else ""))
@@ -185,8 +178,8 @@ def _rejudge(args, json_out: Path | None) -> int:
     old = json.loads(json_out.read_text())
     meta = {k: v for k, v in old.items() if k in ("command", "started", "host", "load_before", "load_after",
                                                    "skipped", "interrupted", "note")}
-    result = cp.aggregate(cp.rejudge(old["rows"], Path(args.rejudge), Forecasts()), meta)
-    cp.write_json(json_out, result)
+    result = jd.aggregate(cp.rejudge(old["rows"], Path(args.rejudge), Forecasts()), meta)
+    jd.write_json(json_out, result)
     if args.report:
         from .report import write_report
         write_report(result, Path(args.report),

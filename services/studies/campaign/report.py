@@ -3,8 +3,9 @@
 * `margin_heatmap.png` — min ground-truth margin of the adversarial wall run over operator
   latency × loss (the operator → controller stream).
 * `margin_by_family.png` — every run's min margin, one column per fault family, violations in red.
-* `actuation_loss.png` — min margin of the controller kill / hang / CAN bus-off runs against the
-  speed at the fault, with the in-process forecast (stopping.py) for the same instants.
+* `actuation_loss.png` — min margin of the controller kill / hang / CAN bus-off / estop runs against
+  the speed toward the face when the fault fired, with the forecast from the run's ground truth at
+  that instant (stopping.forecast_at).
 Matplotlib with the Agg backend; nothing is shown.
 """
 from __future__ import annotations
@@ -36,6 +37,12 @@ def _missed(row: dict) -> str:
     host = row.get("host") or {}
     steps = host.get("robot_physics_steps")
     return f"{100 * host.get('robot_missed_ticks', 0) / steps:.0f} %" if steps else "–"
+
+
+def _fired(row: dict) -> str:
+    """When the row's process faults actually went out, on the run's clock (s)."""
+    times = [f["done_at"] for f in (row.get("fired") or {}).values() if f.get("done_at") is not None]
+    return " ".join(f"{t:.3f}" for t in times) or "–"
 
 
 def grid_cells(rows: list[dict], scenario: str = "adversarial_wall") -> dict[tuple[float, float], float]:
@@ -94,8 +101,12 @@ def markdown(result: dict, plots: list[str], title: str = "Fault campaign") -> s
         lines += [result["note"], ""]
     lines += ["Each run is `sharedctl demo --scenario S --duration D --fault … --headless --no-reference`, judged on "
               "the simulator's ground truth (`violations`: ground-truth samples outside the set; `min_margin`: "
-              "the smallest distance to a face, m). The safety policy and the stopping-distance analysis behind "
-              "the verdicts are in [docs/safety.md](../safety.md).", ""]
+              "the smallest distance to a face, m). Fault times are on the run's clock (t = 0: the operator "
+              "granted the lease, as the controller reports it); `fired` is when each fault actually went out. "
+              "A violation is documented only if a forecast — from the run's ground truth at that instant, "
+              "or the in-process loop for a short hang or a CAN delay — says it must happen; a host that "
+              "could not keep real time is reported, never an excuse. The safety policy and the "
+              "stopping-distance analysis are in [docs/safety.md](../safety.md).", ""]
     for name in plots:
         lines += [f"![{name}]({name})", ""]
     lines += ["## By fault family", "",
@@ -109,24 +120,26 @@ def markdown(result: dict, plots: list[str], title: str = "Fault campaign") -> s
     if not bad:
         lines += ["None.", ""]
     for r in bad:
-        fc = r.get("forecast") or r.get("delay_forecast") or {}
+        fc = r.get("forecast") or r.get("estop_forecast") or r.get("delay_forecast") or {}
         lines.append(f"* `{r['id']}`: {r['violations']} samples outside, first at {_fmt(r['first_violation_t'], 2)} s, "
                      f"min margin {_fmt(r['min_margin'])} m; "
-                     + (f"forecast: speed {_fmt(fc.get('speed'), 2)} m/s at the fault, "
+                     + (f"forecast: speed {_fmt(fc.get('speed'), 2)} m/s at {_fmt(fc.get('t_fault'), 3)} s, "
                         f"margin {_fmt(fc.get('margin'))} m, "
                         f"braking to {_fmt(fc.get('min_margin'))} m; " if "speed" in fc else
-                        f"in-process forecast {_fmt(fc.get('worst_min_margin'))} m; " if fc else "")
-                     + (r["explained"] or "**not explained by the documented limits**"))
+                        f"in-process forecast {_fmt(fc.get('best_min_margin'))} m; " if fc else "")
+                     + (f"host overloaded ({_missed(r)} of the robot's ticks missed); " if r.get("overloaded") else "")
+                     + (r["explained"] or "**not forecast: unexpected**"))
     lines += ["", "## Every run", "",
-              "| # | scenario | faults | outcome | viol. | min margin (m) | estops | forecast margin "
+              "| # | scenario | faults | fired (s) | outcome | viol. | min margin (m) | estops | forecast margin "
               "| robot ticks missed | injected | wall (s) |",
-              "|---:|---|---|---|---:|---:|---:|---:|---:|---|---:|"]
+              "|---:|---|---|---|---|---:|---:|---:|---:|---:|---|---:|"]
     for i, r in enumerate(rows):
         law = f" [{r['controller']}]" if r.get("controller") in ("nce", "of") else ""
-        fc = (r.get("forecast") or {}).get("min_margin")
+        fc = (r.get("forecast") or r.get("delay_forecast") or {})
+        fc = fc.get("min_margin") if "speed" in fc else fc.get("best_min_margin")
         lines.append(f"| {i} | {r['scenario']}{law} | {' '.join(f'`{f}`' for f in r['faults']) or '—'} | "
-                     f"{r['outcome']} | {r['violations']} | {_fmt(r['min_margin'])} | {r['estops']} | {_fmt(fc)} | "
-                     f"{_missed(r)} | {_injected(r)} | {_fmt(r['wall_seconds'], 1)} |")
+                     f"{_fired(r)} | {r['outcome']} | {r['violations']} | {_fmt(r['min_margin'])} | {r['estops']} | "
+                     f"{_fmt(fc)} | {_missed(r)} | {_injected(r)} | {_fmt(r['wall_seconds'], 1)} |")
     lines.append("")
     return "\n".join(lines)
 
@@ -209,9 +222,9 @@ def _actuation(rows, path: Path) -> Path | None:
         ax.plot(fc["approach_speed"], max(r["min_margin"], -1.5), "o", color=color, alpha=0.8)
         ax.plot(fc["approach_speed"], max(fc["min_margin"], -1.5), "x", color="k", alpha=0.6)
     ax.axhline(0.0, color="k", lw=1)
-    ax.set_xlabel("speed toward the nearest face when actuation is lost (m/s, forecast)")
+    ax.set_xlabel("speed toward the nearest face when actuation was lost (m/s, ground truth)")
     ax.set_ylabel("min margin (m; clipped at −1.5)")
-    ax.set_title("controller kill / hang, CAN bus-off: measured (o) vs forecast (x)")
+    ax.set_title("controller kill / hang, CAN bus-off, estop: measured (o) vs forecast (x)")
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)

@@ -23,7 +23,15 @@ A loss of actuation at speed v toward a face at distance d keeps the robot insid
 D(v) < d. `speed_limit(d)` inverts D. `forecast` measures the same thing on the robot's true
 plant (RK4, the same friction as `sharedctl robot`): it runs the scenario's sampled loop
 (`SharedController.step` at 500 Hz) to the fault time, holds the last torque for T_w and lets
-the robot coast to rest, and reports the smallest margin reached. Pure: no clocks, no I/O.
+the robot coast to rest, and reports the smallest margin reached.
+
+`forecast_at` is the judge of a distributed run: the same coast on the plant, started from the
+run's own ground truth at the instant the fault actually fired (`state_at`: the two ground-truth
+samples around it, interpolated). What is not known exactly — the torque the drives hold (the
+controller's last reported one, or the one the ground truth's acceleration shows just before the
+fault), how long they hold it (the watchdog counts from the last frame that reached them, up to a
+period before the fault) — is taken in the robot's favour: the outcome is the best over the
+candidates, so a violation it shows is one that must happen. Pure: no clocks, no I/O.
 """
 from __future__ import annotations
 
@@ -120,6 +128,8 @@ class CoastOutcome:
     travelled: float         # path length from the fault to rest, m
     predicted_distance: float  # D(speed) of the worst-direction coast model
     rest_time: float         # s from the fault to rest
+    hold: float = WATCHDOG   # s the torque was held before the brakes (the best candidate's)
+    candidates: int = 1      # (held torque, hold) pairs tried; the outcome is the best of them
 
     @property
     def violates(self) -> bool:
@@ -223,3 +233,93 @@ def delayed_loop_margin(scenario, duration: float, loop_delay: float, controller
         peak = max(peak, float(np.linalg.norm(ps.qd[:2])))
         history = history[1:] + [(ps.q.copy(), ps.qd.copy())]
     return min_margin, peak
+
+
+def approach_window(samples, plant: Plant, feasible, rest_speed: float = 0.02) -> tuple[float, float, float, float]:
+    """(start, end, peak speed, reach) of a sampled loop's approach to a face: the peak approach speed, the
+    stopping distance D from it (the last torque 0 held T_w, then the brakes), the first instant the
+    nearest face is within D (a loss of actuation from then on can end at it), and the first instant after
+    that at which the robot is at rest."""
+    speeds = [approach_speed(feasible, s.q, s.qd) for s in samples]
+    peak = max(speeds)
+    reach = worst_coast_model(plant).stopping_distance(peak)
+    start = next(s.t for s in samples if feasible.margin(s.q) <= reach)
+    end = next(s.t for s in samples if s.t > start and float(np.linalg.norm(s.qd[:2])) < rest_speed)
+    return start, end, peak, reach
+
+
+# ----- from the ground truth at the instant a fault fired --------------------------------------
+def state_at(truth, t: float) -> tuple[float, np.ndarray, np.ndarray] | None:
+    """(t, q, q̇) at `t` from ground-truth rows [t_i, *q, *q̇] sorted by t_i: linear between the samples
+    either side of `t`; the last sample before `t` if none follows it; None if none precedes it."""
+    rows = [np.asarray(r, float) for r in truth]
+    before = [r for r in rows if r[0] <= t]
+    if not before:
+        return None
+    a = before[-1]
+    after = [r for r in rows if r[0] > t]
+    n = (len(a) - 1) // 2
+    if not after or after[0][0] <= a[0]:
+        return t, a[1:1 + n].copy(), a[1 + n:].copy()
+    b = after[0]
+    w = (t - a[0]) / (b[0] - a[0])
+    x = (1.0 - w) * a[1:] + w * b[1:]
+    return t, x[:n], x[n:]
+
+
+def true_plant(scenario, controller: str | None = None):
+    """(the robot's true plant as `sharedctl robot` integrates it, the scenario's admissible set)."""
+    loop, _, _ = scenario.closed_loop(controller)
+    return Plant(loop.model, RobotSimConfig.from_table(scenario.data.get("robot_sim"))), loop.feasible
+
+
+def held_torques(torques, t: float, count: int = 1) -> list[tuple[float, ...]]:
+    """The last `count` wheel torques reported at or before `t` (rows [t_i, *τ]); zero torque if none."""
+    rows = sorted((r for r in torques if r[0] <= t), key=lambda r: r[0])[-count:]
+    return [tuple(float(x) for x in r[1:]) for r in rows] or [(0.0, 0.0, 0.0)]
+
+
+def torque_from_truth(plant: Plant, truth, t: float) -> tuple[float, ...] | None:
+    """The wheel torques the drives applied over the last ground-truth interval ending at or before `t`, read
+    from the acceleration it shows: u = M q̈ less the model's coupling (the plant's own equations), τ =
+    B(ψ)⁻¹ u plus the wheels' friction. None without two samples before `t`."""
+    rows = [np.asarray(r, float) for r in truth if r[0] <= t]
+    if len(rows) < 2 or rows[-1][0] <= rows[-2][0]:
+        return None
+    a, b = rows[-2], rows[-1]
+    n = (len(a) - 1) // 2
+    qdd = (b[1 + n:] - a[1 + n:]) / (b[0] - a[0])
+    q, qd = 0.5 * (a[1:1 + n] + b[1:1 + n]), 0.5 * (a[1 + n:] + b[1 + n:])
+    m1, m3, coupling = (float(x) for x in plant.model.theta)
+    u = np.array([m1 * qdd[0] + coupling * qd[2] * qd[1], m1 * qdd[1] - coupling * qd[2] * qd[0], m3 * qdd[2]])
+    omega = plant.wheel_speeds(plant.initial_state(q, qd))
+    tau = np.asarray(plant.model.wheel_torques(q, u), float) + plant.friction(omega)
+    return tuple(float(x) for x in tau)
+
+
+def forecast_at(plant: Plant, feasible, truth, torques, t_fired: float,
+                holds: tuple[float, ...] = (WATCHDOG,)) -> CoastOutcome | None:
+    """A loss of actuation at `t_fired` (the run's clock), from the run's ground truth at that instant:
+    each held torque — the last one the controller reported (`held_torques`, up to a telemetry period
+    old) and the one the ground truth's acceleration shows just before (`torque_from_truth`, over the
+    last ground-truth interval) — for each of `holds` s, then the
+    brakes; the best outcome (largest min margin) of them. None without a ground-truth sample at or
+    before `t_fired`."""
+    at = state_at(truth, t_fired)
+    if at is None:
+        return None
+    _, q, qd = at
+    best = None
+    held = held_torques(torques, t_fired) if torques else []
+    shown = torque_from_truth(plant, truth, t_fired)
+    held += [shown] if shown is not None else []
+    candidates = [(tau, hold) for tau in held or [(0.0, 0.0, 0.0)] for hold in holds]
+    for tau, hold in candidates:
+        min_margin, path, rest = coast(plant, feasible, q, qd, tau, hold)
+        if best is None or min_margin > best[0]:
+            best = (min_margin, path, rest, hold)
+    speed = float(np.linalg.norm(qd[:2]))
+    return CoastOutcome(t_fault=t_fired, speed=speed, approach_speed=approach_speed(feasible, q, qd),
+                        margin=feasible.margin(q), min_margin=best[0], travelled=best[1],
+                        predicted_distance=worst_coast_model(plant).stopping_distance(speed, best[3]),
+                        rest_time=best[2], hold=best[3], candidates=len(candidates))
