@@ -22,6 +22,13 @@ Two checks, both per row of a polytope that contains q (`BackupModel`):
   acceleration a = M⁻¹(u − C v − g)) and braking from v + a T_w stays δ inside, and the state one
   control period later (q + v dt + ½a dt², v + a dt) is backup-safe.
 
+A model whose acceleration under a held torque is not constant (the 2-link arm: M(q), C and g(q)
+move during the hold) gives `BackupModel.hold_deviation`, a bound (x, y) of how far q and q̇
+depart from the constant-acceleration motion over a hold of T (`models/planar_arm_stop.py` for the
+arm); then every reach adds ‖K_j‖x to the hold's advance and brakes from speeds y higher, with
+every block's deflection taken as π, and the next state's check allows for the period's own
+deviation. Without it (the omnidirectional robot: exact) every result is the one above.
+
 `govern` returns the command to send: u itself when it is backup-safe, else the point of the
 segment from u to the fallback u_g closest to u that is; when not even u_g is (the state is
 outside the envelope: no stop from here ends δ inside), the one of u and u_g whose stop ends
@@ -36,6 +43,8 @@ import math
 from dataclasses import dataclass, field
 
 import numpy as np
+
+from .models.planar_arm_stop import ArmBounds, ArmHoldDeviation
 
 
 @dataclass(frozen=True)
@@ -101,6 +110,9 @@ class BackupModel:
     margin: float = 0.01                 # δ (m): how far inside the stop must end
     extra_deceleration: float = 1.0      # a_extra: the fallback brakes this much harder than the brakes
     iterations: int = 12                 # govern's most probes between u and u_g
+    # (‖v‖, ‖a‖, T) → (x, y): ‖q(t) − q − vt − ½at²‖ ≤ x and ‖q̇(t) − v − at‖ ≤ y for t ≤ T while the torque
+    # of acceleration a is held, nondecreasing in each argument; None: the held acceleration is constant
+    hold_deviation: object = None
 
     def __post_init__(self):
         if not (self.hold >= 0.0 and self.margin >= 0.0 and self.extra_deceleration > 0.0):
@@ -152,8 +164,11 @@ class BackupModel:
         return a
 
 
-def _state_reach(backup: BackupModel, rows, v) -> list[float]:
-    """BackupModel.state_reach on rows as `_rows_of` gives them and v as floats."""
+def _state_reach(backup: BackupModel, rows, v, slack: float = 0.0) -> list[float]:
+    """BackupModel.state_reach on rows as `_rows_of` gives them and v as floats (with a hold
+    deviation: for every velocity within `slack` of v)."""
+    if backup.hold_deviation is not None:
+        return _deviating_state_reach(backup, rows, v, slack)
     T = backup.hold
     reach = [max(_dot(k, v), 0.0) * T for k, _, _ in rows]
     return _add_braking(backup, rows, v, reach)
@@ -161,6 +176,8 @@ def _state_reach(backup: BackupModel, rows, v) -> list[float]:
 
 def _command_reach(backup: BackupModel, rows, v, a) -> list[float]:
     """BackupModel.command_reach on rows as `_rows_of` gives them and v, a as floats."""
+    if backup.hold_deviation is not None:
+        return _deviating_command_reach(backup, rows, v, a)
     T = backup.hold
     reach = []
     for k, _, _ in rows:
@@ -179,6 +196,66 @@ def _add_braking(backup: BackupModel, rows, v_end, reach) -> list[float]:
         extra = block.advance([parts[b] for _, _, parts in rows], [v_end[i] for i in block.axes])
         reach = [r + e for r, e in zip(reach, extra)]
     return reach
+
+
+# ----- a hold that departs from constant acceleration (BackupModel.hold_deviation) ------------
+def _deviating_state_reach(backup: BackupModel, rows, v, slack: float) -> list[float]:
+    """The state's reach for every velocity v' with ‖v' − v‖ ≤ slack: the fallback u_g held T_w
+    (its constant-acceleration part advances a row at most (K_j v')⁺ T_w ≤ ((K_j v)⁺ + ‖K_j‖ slack) T_w,
+    its deviation at most ‖K_j‖ x), then the brakes from block speeds |v_b| + slack + y (deflection π);
+    (x, y) the deviation of a hold of T_w from speed ‖v‖ + slack at the fallback's largest acceleration."""
+    T = backup.hold
+    speed = _norm(v) + slack
+    dq, dv = backup.hold_deviation(speed, _fallback_size(backup, speed), T)
+    reach = [(max(_dot(k, v), 0.0) + _norm(k) * slack) * T + _scaled(_norm(k), dq) for k, _, _ in rows]
+    return _add_deviating_braking(backup, rows, v, slack + dv, reach)
+
+
+def _deviating_command_reach(backup: BackupModel, rows, v, a) -> list[float]:
+    """The command's reach: each row's largest advance under the constant acceleration a over T_w,
+    plus ‖K_j‖ x; then the brakes from block speeds |v_b + a_b T_w| + y (deflection π)."""
+    T = backup.hold
+    dq, dv = backup.hold_deviation(_norm(v), _norm(a), T)
+    reach = []
+    for k, _, _ in rows:
+        w = _dot(k, v)
+        alpha = _dot(k, a)
+        advance = max(w * T + 0.5 * alpha * T * T, 0.0)
+        if alpha < 0.0 and 0.0 < -w / alpha < T:
+            advance = max(advance, -w * w / (2.0 * alpha))
+        reach.append(advance + _scaled(_norm(k), dq))
+    return _add_deviating_braking(backup, rows, [vj + aj * T for vj, aj in zip(v, a)], dv, reach)
+
+
+def _add_deviating_braking(backup: BackupModel, rows, v_end, spread: float, reach) -> list[float]:
+    """reach + Σ_b |K_j,b| s_b(|v_end,b| + spread): the braked path from any velocity within
+    `spread` of v_end, whose direction the deviation leaves free (deflection π)."""
+    for b, block in enumerate(backup.blocks):
+        path = _braked_path(block, _norm([v_end[i] for i in block.axes]) + spread)
+        reach = [r + _scaled(parts[b][1], path) for r, (_, _, parts) in zip(reach, rows)]
+    return reach
+
+
+def _braked_path(block: BrakeBlock, speed: float) -> float:
+    """s_b(speed), inf for an unbounded speed (a hold deviation without a bound)."""
+    return block.distance(speed) if speed < math.inf else math.inf
+
+
+def _scaled(norm: float, length: float) -> float:
+    """norm · length, 0 for a row with no part here (even when the length is unbounded)."""
+    return norm * length if norm > 0.0 else 0.0
+
+
+def _fallback_size(backup: BackupModel, speed: float) -> float:
+    """The largest ‖a_g‖ of `fallback_acceleration` over velocities of norm ≤ speed (each block's
+    deceleration grows with its speed, which is at most ‖v‖)."""
+    total = 0.0
+    for block in backup.blocks:
+        decel = block.coulomb + block.viscous * speed + backup.extra_deceleration
+        if backup.hold > 0.0:
+            decel = min(decel, speed / backup.hold)
+        total += decel * decel
+    return math.sqrt(total)
 
 
 @dataclass(frozen=True)
@@ -302,6 +379,8 @@ class _Probe:
             return command - delta
         q1 = [qi + vi * dt + 0.5 * ai * dt * dt for qi, vi, ai in zip(q, v, a)]
         v1 = [vi + ai * dt for vi, ai in zip(v, a)]
+        if backup.hold_deviation is not None:
+            return min(command, self._deviating_state(split, q1, v1, a)) - delta
         state = -math.inf
         for rows, near, far in split:
             x1 = [_dot(rows[j][0], q1) + rows[j][1] for j in near]
@@ -313,6 +392,24 @@ class _Probe:
                 value = min(value, min(-(xj + r) for xj, r in zip(x1, reach)))
             state = max(state, value)
         return min(command, state) - delta
+
+    def _deviating_state(self, split, q1, v1, a) -> float:
+        """The next state's backup margin when the period itself departs from constant acceleration
+        by (x, y) = hold_deviation(‖v‖, ‖a‖, dt): every row value x_j ≤ K_j q1 + T_j + ‖K_j‖x and every
+        velocity within y of v1. A polytope counts only when it contains every such position."""
+        backup = self.backup
+        dq, dv = backup.hold_deviation(_norm(self.v), _norm(a), self.dt)
+        state = -math.inf
+        for rows, near, far in split:
+            x1 = [_dot(rows[j][0], q1) + rows[j][1] + _scaled(_norm(rows[j][0]), dq) for j in near]
+            if x1 and max(x1) >= 0.0:
+                continue
+            value = far
+            if near:
+                reach = _state_reach(backup, [rows[j] for j in near], v1, dv)
+                value = min(value, min(-(xj + r) for xj, r in zip(x1, reach)))
+            state = max(state, value)
+        return state
 
 
 def _crude_rows(bounds: list):
@@ -331,12 +428,31 @@ def _crude_rows(bounds: list):
 def _block_bounds(backup: BackupModel, v: list, a: list, dt: float) -> list[float]:
     """Per block, C_b = (|v_b| + |a_b| T)(T + dt) + s_b(|v_b| + |a_b| T) with T = max(T_w, dt): no
     row advances more than Σ_b |K_j,b| C_b, neither while a is held T_w then braked, nor over one
-    period plus the stop of the state it leads to (docs/control.md §10). Floats in, floats out."""
+    period plus the stop of the state it leads to (docs/control.md §10). Floats in, floats out.
+
+    With a hold deviation, (x, y) = hold_deviation(‖v‖, ‖a‖, T) and (x_g, y_g) that of the fallback
+    from speed S = ‖v‖ + ‖a‖T + y: C_b = t_b(T + dt) + x + x_g + s_b(t_b + y_g), t_b = |v_b| + |a_b|T + y
+    (‖K_j‖ ≤ Σ_b |K_j,b| since the blocks cover every coordinate, `_rows_of`)."""
+    if backup.hold_deviation is not None:
+        return _deviating_block_bounds(backup, v, a, dt)
     T = max(backup.hold, dt)
     bounds = []
     for block in backup.blocks:
         top = _norm([v[i] for i in block.axes]) + _norm([a[i] for i in block.axes]) * T
         bounds.append(top * (T + dt) + block.distance(top))
+    return bounds
+
+
+def _deviating_block_bounds(backup: BackupModel, v: list, a: list, dt: float) -> list[float]:
+    """`_block_bounds` for a model with a hold deviation."""
+    T = max(backup.hold, dt)
+    dq, dv = backup.hold_deviation(_norm(v), _norm(a), T)
+    speed = _norm(v) + _norm(a) * T + dv
+    dq_g, dv_g = backup.hold_deviation(speed, _fallback_size(backup, speed), backup.hold)
+    bounds = []
+    for block in backup.blocks:
+        top = _norm([v[i] for i in block.axes]) + _norm([a[i] for i in block.axes]) * T + dv
+        bounds.append(top * (T + dt) + dq + dq_g + _braked_path(block, top + dv_g))
     return bounds
 
 
@@ -422,8 +538,12 @@ def _as_floats(x) -> list[float]:
 
 
 def _rows_of(backup: BackupModel, K) -> list:
-    """[(K_j, 0, [(K_j,b, |K_j,b|) per block]) …] for the rows of K, as floats."""
+    """[(K_j, 0, [(K_j,b, |K_j,b|) per block]) …] for the rows of K, as floats. With a hold deviation
+    the blocks must cover every coordinate (the deviation moves all of them)."""
     K = np.asarray(K, float)
+    covered = sorted(i for b in backup.blocks for i in b.axes)
+    if backup.hold_deviation is not None and covered != list(range(K.shape[1])):
+        raise ValueError("backup: with a hold deviation the brake blocks must cover every coordinate once")
     parts = [[(tuple(K[j, list(b.axes)].tolist()), float(np.linalg.norm(K[j, list(b.axes)])))
               for b in backup.blocks] for j in range(K.shape[0])]
     return [(tuple(K[j].tolist()), 0.0, parts[j]) for j in range(K.shape[0])]
@@ -477,3 +597,13 @@ def omni_backup(parameters, brake_torque: float, friction_coulomb: float, fricti
                              TRANSLATION_DEFLECTION, CREEP)
     yaw = BrakeBlock((2,), 3.0 * c * L / (r * m3), 3.0 * friction_viscous * L * L / (r * r * m3), 0.0, CREEP / L)
     return BackupModel(hold, (translation, yaw), margin)
+
+
+def arm_backup(parameters, brake_torque, hold: float, margin: float = 0.01) -> BackupModel:
+    """The two-link arm's stop (docs/control.md §10, "The arm's stop"): one block over both joints
+    with a_c from the joint brakes' Coulomb torques `brake_torque` = (c1, c2) (N·m, each above its
+    joint's largest gravity torque), k = 0 and deflection π; the hold's deviation from constant
+    acceleration bounded per probe from ‖v‖, ‖a‖ and T (models/planar_arm_stop.py)."""
+    bounds = ArmBounds.of(parameters.theta())
+    block = BrakeBlock((0, 1), bounds.braking_deceleration(brake_torque), 0.0)
+    return BackupModel(hold, (block,), margin, hold_deviation=ArmHoldDeviation.of(bounds))

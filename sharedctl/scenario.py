@@ -14,6 +14,8 @@ Keys (all SI; see docs/scenarios.md):
   [gains.of] K1, k2, gamma_theta, sign_width   [gains.of_barrier] Kp, lam, gamma_theta, barrier_weight
   [gains.observer] Ka, Kb, sign_width
   theta_hat0 = [...]  (default zeros, as in the paper)
+  [backup]   enabled, hold (s), margin; omni3: brake_torque, friction_coulomb, friction_viscous (on by
+             default); arm2: brake_torque = [c1, c2] (N·m per joint; off unless enabled = true)
 """
 from __future__ import annotations
 
@@ -22,7 +24,7 @@ from dataclasses import dataclass, field, fields
 
 import numpy as np
 
-from .backup import omni_backup
+from .backup import arm_backup, omni_backup
 from .constraints import FeasibleSet, Polytope
 from .human import AdversarialOperator, CircleTrajectory, JoystickSpring, LineTrajectory, ScriptedOperator
 from .models import OmniRobot, PlanarArm
@@ -198,23 +200,33 @@ def build(data: dict, controller: str | None):
 BACKUP_DEFAULTS = {"hold": 0.1, "brake_torque": 1.0, "friction_coulomb": 0.05, "friction_viscous": 0.01,
                    "margin": 0.01}
 
+#: `[backup]` keys and defaults for robot.kind = arm2: the drives' watchdog (s; a small arm's drives are
+#: sampled at 1–2 kHz, and over much longer holds its motion under a held torque has no useful bound),
+#: each joint's spring-applied brake (N·m; above the joint's largest gravity torque, θ4 + θ5 = 7.95 and
+#: θ5 = 1.57 N·m for the default arm, so the brakes hold it at rest anywhere: a_c = 6.61 rad/s²) and δ (rad)
+ARM_BACKUP_DEFAULTS = {"hold": 0.02, "brake_torque": (20.0, 5.0), "margin": 0.01}
+
 
 def _backup(table, model):
     """The scenario's BackupModel (sharedctl/backup.py): on by default for the omnidirectional robot,
-    `enabled = false` turns it off; the arm has no brake model and refuses `enabled = true`."""
+    `enabled = false` turns it off; for the arm off by default, `enabled = true` turns on its joint
+    brakes' model (`arm_backup`)."""
     if not isinstance(table, dict):
         raise ScenarioError("backup must be a table")
-    unknown = set(table) - set(BACKUP_DEFAULTS) - {"enabled"}
+    arm = isinstance(model, PlanarArm)
+    defaults = ARM_BACKUP_DEFAULTS if arm else BACKUP_DEFAULTS
+    unknown = set(table) - set(defaults) - {"enabled"}
     if unknown:
-        allowed = sorted(BACKUP_DEFAULTS) + ["enabled"]
-        raise ScenarioError(f"unknown key backup.{sorted(unknown)[0]} (allowed: {allowed})")
+        allowed = sorted(defaults) + ["enabled"]
+        raise ScenarioError(f"unknown key backup.{sorted(unknown)[0]} (allowed for {'arm2' if arm else 'omni3'}: "
+                            f"{allowed})")
     enabled = table.get("enabled", isinstance(model, OmniRobot))
     if not isinstance(enabled, bool):
         raise ScenarioError("backup.enabled must be true or false")
     if not enabled:
         return None
-    if not isinstance(model, OmniRobot):
-        raise ScenarioError("backup.enabled: only robot.kind = omni3 has a brake model")
+    if arm:
+        return _arm_backup(table, model)
     values = {}
     for key, default in BACKUP_DEFAULTS.items():
         value = _number(table, key, default, "backup.")
@@ -223,3 +235,16 @@ def _backup(table, model):
         values[key] = value
     return omni_backup(model.parameters, values["brake_torque"], values["friction_coulomb"],
                        values["friction_viscous"], values["hold"], values["margin"])
+
+
+def _arm_backup(table, model):
+    hold = _number(table, "hold", ARM_BACKUP_DEFAULTS["hold"], "backup.")
+    margin = _number(table, "margin", ARM_BACKUP_DEFAULTS["margin"], "backup.")
+    if hold < 0 or margin < 0:
+        raise ScenarioError("backup.hold and backup.margin must be >= 0")
+    brake = (_vector(table, "brake_torque", 2, "backup.") if "brake_torque" in table
+             else ARM_BACKUP_DEFAULTS["brake_torque"])
+    try:
+        return arm_backup(model.parameters, brake, hold, margin)
+    except ValueError as exc:
+        raise ScenarioError(f"backup.brake_torque: {exc}") from None

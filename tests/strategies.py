@@ -703,3 +703,66 @@ adversarial_cases = seeds.map(adversarial_case)
 fast_approach_cases = seeds.map(fast_approach_case)
 arm_box_cases = seeds.map(random_arm_box_case)
 controllers = st.sampled_from(CONTROLLERS)
+
+
+# ----- operators for the fault-envelope properties (tests/test_fault_envelope_properties.py) ------
+# Both drive the handle within the joystick's range (|deflection| ≤ 1 per coordinate, as the wire
+# carries it), with a spring constant k_p of 20–60 N per unit deflection.
+OPERATOR_KP = (20.0, 60.0)
+
+
+def _push_towards(target: np.ndarray, kp: float):
+    """u_h(t, q, v) = k_p d with d the direction to `target` in (x, y), the larger coordinate at full
+    deflection (less within 1 m of the target), and ψ turned back towards 0."""
+    def push(t, q, v, target=target, kp=kp):
+        d = np.zeros(3)
+        gap = target[:2] - np.asarray(q, float)[:2]
+        d[:2] = gap / max(1.0, float(np.max(np.abs(gap))))
+        d[2] = float(np.clip(-q[2], -1.0, 1.0))
+        return kp * d
+    return push
+
+
+def face_rush_operator(case: Case, seed: int) -> tuple[ArbitraryOperator, str]:
+    """An operator who drives at a face and ignores what the robot does: full deflection towards a
+    point 1 m beyond the face — the one the case's own desired trajectory first leaves through, or
+    a random face of a random polytope (1 m out along its normal from q0's foot on it, shifted up to
+    1 m along it) — so the robot reaches the face at the speed the set lets it gather. The wish the
+    machine sees is that point, fixed. Returns the operator and a line describing it."""
+    rng = np.random.default_rng(seed + 2_000_003)
+    kp = rng.uniform(*OPERATOR_KP)
+    q0 = np.asarray(case.q0, float)
+    t_exit = first_exit_time(case.regions, case.human.trajectory, 12.0)
+    if rng.uniform() < 0.5 and t_exit is not None:
+        exit_point = case.human.trajectory.sample(t_exit).q[:2]
+        heading = exit_point - q0[:2]
+        target_xy = exit_point + heading / max(float(np.linalg.norm(heading)), 1e-9)
+        aim = "the desired line's exit"
+    else:
+        r = int(rng.integers(0, len(case.regions)))
+        K, T = (np.asarray(x, float) for x in case.regions[r])
+        planar = [i for i in range(len(K)) if np.linalg.norm(K[i, :2]) > 0.5]
+        j = int(rng.choice(planar))
+        n = K[j, :2] / np.linalg.norm(K[j, :2])
+        foot = q0[:2] - (float(K[j] @ q0) + T[j]) / float(np.linalg.norm(K[j, :2])) * n
+        target_xy = foot + n + rng.uniform(-1.0, 1.0) * np.array([-n[1], n[0]])
+        aim = f"face {j} of polytope {r}"
+    target = np.array([target_xy[0], target_xy[1], 0.0])
+    operator = ArbitraryOperator(LineTrajectory(target.copy(), np.zeros(3)), np.full(3, kp),
+                                 function=_push_towards(target, kp))
+    return operator, f"rush at {aim} ({np.round(target_xy, 2)}), k_p {kp:.0f}"
+
+
+def random_deflection_operator(case: Case, seed: int) -> tuple[ArbitraryOperator, str]:
+    """An operator who moves the handle at random: a deflection uniform in [−1, 1] per coordinate
+    (ψ: [−0.3, 0.3]), re-drawn every 0.1–0.5 s and held in between (no damping: the speed wanders);
+    the wish the machine sees is the case's own desired trajectory. Returns the operator and a line
+    describing it."""
+    rng = np.random.default_rng(seed + 3_000_017)
+    kp = rng.uniform(*OPERATOR_KP)
+    hold = rng.uniform(0.1, 0.5)
+    times = np.arange(0.0, 12.0, hold)
+    deflections = rng.uniform(-1.0, 1.0, size=(times.size, 3))
+    deflections[:, 2] *= 0.3
+    operator = ArbitraryOperator(case.human.trajectory, np.full(3, kp), times=times, forces=kp * deflections)
+    return operator, f"random deflections every {hold:.2f} s, k_p {kp:.0f}"
