@@ -13,6 +13,9 @@ Keys (all SI; see docs/scenarios.md):
   [gains.ce] Kp, lam, gamma_theta   [gains.nce] (over [gains.ce]) Kp, lam, gamma_theta, k_q, alpha_n, gamma_n, nu
   [gains.of] K1, k2, gamma_theta, sign_width   [gains.of_barrier] Kp, lam, gamma_theta, barrier_weight
   [gains.observer] Ka, Kb, sign_width
+  [gains.adaptation] (every law's robust θ̂ update, docs/control.md §11) leakage (σ₀, 1/s; 0: off),
+             band_lower, band_upper (the trust box T), theta_lower, theta_upper (the physical box B);
+             unset: the model's
   theta_hat0 = [...]  (default zeros, as in the paper)
   [backup]   enabled, hold (s), margin; omni3: brake_torque, friction_coulomb, friction_viscous (on by
              default); arm2: brake_torque = [c1, c2] (N·m per joint; off unless enabled = true)

@@ -174,9 +174,7 @@ class SharedController:
                 out = law.evaluate(model, grp, c, q, v_used, theta_hat, law_state)
                 u_f = out.u
                 if decision.authority is Authority.MACHINE:
-                    theta_next = theta_hat + dt * out.theta_dot
-                    if law.projects_estimate:
-                        theta_next = model.project(theta_next)
+                    theta_next = law.project(model, theta_hat + dt * out.theta_dot)   # B, when the law projects
             else:
                 u_f = self.recovery_force(grp, q, v_used)
         u_s = shared_input(decision, u_h, u_f)

@@ -63,6 +63,19 @@ def test_random_arm_box_stays_inside(case, controller):
     assert_invariant(case, controller)
 
 
+@pytest.mark.parametrize("controller", ["ce", "nce"])
+def test_arm_stays_inside_while_its_adapted_inertia_makes_the_loop_stiff(controller):
+    """random_arm_box_case(20001): box −1.12 ≤ q1 ≤ 1.84, 0.15 ≤ q2 ≤ 2.57. The machine takes
+    the lower corner (group 3) at t = 2.657 s with L ≈ 120, of which γ_θ|θ̃|²/2 ≈ 106, mostly the
+    unlearnt gravity moments; (12)'s update turns it into θ̂₁ = θ̂₂ = 0, θ̂₃ ≈ 1.5 (θ₃ = 0.044): an
+    indefinite estimated inertia, M⁻¹M̂ with an eigenvalue ≈ 64, and a closed loop whose fastest
+    mode reaches ≈ −7400 s⁻¹ with q2 27 mrad from its limit, past a 0.5 ms RK4 step's stability
+    bound 2.785/dt. L fell along the solution until the integrator amplified that mode, and then
+    rose; the run stopped at t = 2.671 s (ce) and 2.684 s (nce) before the simulator's step control
+    (simulator._advance). Integrated finely (dt = 0.1 ms) the same loop stays ≥ 15 mm inside."""
+    assert_invariant(S.random_arm_box_case(20001), controller)
+
+
 def test_arm_sharing_properties_hold():
     """On one arm run (the L-shaped set, ce law): u_s = u_h under operator authority, take-overs
     only within b1 of a joint limit, releases only after Δt (S.sharing_failures), at most

@@ -3,7 +3,7 @@ import numpy as np
 import pytest
 
 from sharedctl.constraints import FeasibleSet, Polytope
-from sharedctl.controllers import CertaintyEquivalentLaw
+from sharedctl.controllers import Adaptation, CertaintyEquivalentLaw
 from sharedctl.models import PlanarArm
 from sharedctl.simulator import ClosedLoop, make_controller, simulate
 from sharedctl.sharing import Mode, SharingParameters
@@ -29,10 +29,13 @@ def lyapunov_along(loop, trace, law=LAW):
 
 @pytest.mark.parametrize("projection", [False, True])
 def test_lyapunov_function_never_increases_and_matches_its_predicted_rate(projection):
-    """With the parameter projection on, L may only drop further (the box contains θ), so the
-    identity L(t) − L(0) = ∫L̇ becomes an inequality; without it, it holds to integration accuracy."""
+    """With the parameter projection and the leakage on, L may only drop further (the boxes contain θ),
+    so the identity L(t) − L(0) = ∫L̇ becomes an inequality; without them ((12) as printed), it holds
+    to integration accuracy."""
     loop = omni_loop(WALL_K, WALL_T, line([-0.5, 2.0, 0.0], [-0.1, 0.3, 0.05]), "ce")
     loop.controller.tracking.projects_estimate = projection
+    if not projection:
+        loop.controller.tracking.adaptation = Adaptation(leakage=0.0)
     dt = 1e-3
     trace = simulate(loop, np.array([-0.5, 3.0, 0.2]), np.array([0.3, 0.8, 0.0]), 6.0, dt)
     assert trace.finite and trace.inside.all()

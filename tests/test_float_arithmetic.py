@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from sharedctl.constraints import FeasibleSet, Polytope
-from sharedctl.controllers import CertaintyEquivalentLaw, NonCertaintyEquivalentLaw
+from sharedctl.controllers import Adaptation, CertaintyEquivalentLaw, NonCertaintyEquivalentLaw
 from sharedctl.models import OmniRobot, PlanarArm
 from sharedctl.reference import ReferenceShape, saturate, saturate_floats
 from sharedctl.short_vectors import all_finite, dot, matvec, rows_of
@@ -67,8 +67,11 @@ def test_the_certainty_equivalent_law_on_floats_is_paper_12(case):
 
 @pytest.mark.parametrize("case", CASES, ids=list(CASES))
 def test_the_non_certainty_equivalent_law_on_floats_is_paper_13_14(case):
+    """(13)–(14) with the robust update's leakage on the estimate ϑ = θ̂ + β (docs/control.md §11)."""
     model, group, c, q, v = _instant(case)
-    law = NonCertaintyEquivalentLaw()
+    band_lower, band_upper = 0.4 * model.theta, 0.6 * model.theta
+    law = NonCertaintyEquivalentLaw(adaptation=Adaptation(leakage=2.0, band_lower=tuple(band_lower),
+                                                          band_upper=tuple(band_upper)))
     n, k = model.n, model.n_theta
     rng = np.random.default_rng(7)
     p_n, W_n = rng.standard_normal(n), rng.standard_normal((n, k))
@@ -81,7 +84,10 @@ def test_the_non_certainty_equivalent_law_on_floats_is_paper_13_14(case):
     g = law.gamma_n
     out = law.evaluate(model, group, c, q, v, theta_hat, np.concatenate([p_n, W_n.ravel()]))
     np.testing.assert_allclose(out.u, -W @ (theta_hat + g * W_n.T @ p_n) - g * W_n @ (W_n.T @ s), rtol=1e-12)
-    np.testing.assert_allclose(out.theta_dot, g * (law.alpha_n * W_n - W).T @ p_n + g * law.k_q * W_n.T @ p_n,
+    estimate = theta_hat + g * W_n.T @ p_n
+    leak = 2.0 * (estimate - np.clip(estimate, band_lower, band_upper))
+    assert np.count_nonzero(leak) >= 2                      # the leakage acts on this estimate
+    np.testing.assert_allclose(out.theta_dot, g * (law.alpha_n * W_n - W).T @ p_n + g * law.k_q * W_n.T @ p_n - leak,
                                rtol=1e-12)
     np.testing.assert_allclose(out.state_dot,
                                np.concatenate([-law.alpha_n * p_n + p, (-law.alpha_n * W_n + W).ravel()]), rtol=1e-12)

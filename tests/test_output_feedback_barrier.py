@@ -17,7 +17,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from sharedctl.controllers import OutputFeedbackBarrierLaw
+from sharedctl.controllers import Adaptation, OutputFeedbackBarrierLaw
 from sharedctl.controllers.output_feedback_barrier import KAPPA
 from sharedctl.metrics import summarize
 from sharedctl.sampled import simulate_sampled
@@ -39,9 +39,10 @@ V_TILDE_MAX = 3.0
 
 # ----- the reference velocity and the Lyapunov identity ------------------------------------
 def _wall_barrier_loop(wish, mode=Mode.MACHINE, projection=False):
-    """The barrier law alone in both roles, on the true velocity (no observer)."""
+    """The barrier law alone in both roles, on the true velocity (no observer); without `projection`,
+    the law as derived (neither the projection nor the leakage of docs/control.md §11)."""
     loop = omni_loop(WALL_K, WALL_T, wish, "of", mode=mode)
-    law = OutputFeedbackBarrierLaw()
+    law = OutputFeedbackBarrierLaw() if projection else OutputFeedbackBarrierLaw(adaptation=Adaptation(leakage=0.0))
     law.projects_estimate = projection
     loop.controller = MachineController(law, law)
     return loop, law

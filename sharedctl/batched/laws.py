@@ -11,6 +11,9 @@ operations) are those of the scalar laws:
 * (25)–(29) output feedback, state [z_f, ξ];
 * the output-feedback configuration's barrier law on v̂ (docs/control.md §4.3), no state;
 * (40) the velocity observer on q, state [q̂, β_o].
+
+Every law's θ̂̇ ends with the robust update's leakage −σ₀ (θ̂ − P_T(θ̂)) and the step projects θ̂ onto
+the physical box B (`RobustUpdate`, controllers/adaptation.py).
 """
 from __future__ import annotations
 
@@ -26,6 +29,7 @@ from ..controllers import (
     VelocityObserver,
 )
 from ..controllers.base import diag_gain
+from ..models import OmniRobot
 from . import plant
 from .geometry import saturate
 
@@ -162,7 +166,35 @@ def _bounded_error_signals(frame: GroupFrame, c: Coordinates, v, lam):
     return v - v_ref, v_ref, a_ref
 
 
-class CertaintyEquivalent:
+class RobustUpdate:
+    """The robust part of a law's θ̂ update (controllers/adaptation.py) for a batch of omni robots:
+    the leakage σ₀ (θ̂ − P_T(θ̂)) subtracted from the law's θ̂̇, and the projection onto B after a step."""
+
+    projects_estimate = True
+
+    def __init__(self, law):
+        band_lower, band_upper, lower, upper = law.adaptation.boxes(OmniRobot)
+        self.sigma = law.adaptation.leakage
+        self.band_lower, self.band_upper = (np.asarray(b, float)[:, None] for b in (band_lower, band_upper))
+        self.lower, self.upper = (np.asarray(b, float)[:, None] for b in (lower, upper))
+
+    def leak(self, theta_dot, estimate):
+        """θ̂̇ −= σ₀ (ϑ − P_T(ϑ)) in place (the scalar law's floats, operation for operation)."""
+        if self.sigma:
+            excess = np.maximum(estimate, self.band_lower)
+            np.minimum(excess, self.band_upper, out=excess)
+            np.subtract(estimate, excess, out=excess)
+            excess *= self.sigma
+            theta_dot -= excess
+        return theta_dot
+
+    def project(self, theta_hat):
+        """θ̂ projected onto B (EulerLagrangeModel.project)."""
+        out = np.maximum(theta_hat, self.lower)
+        return np.minimum(out, self.upper, out=out)
+
+
+class CertaintyEquivalent(RobustUpdate):
     """(12)."""
 
     state_size = 0
@@ -170,6 +202,7 @@ class CertaintyEquivalent:
     applied_input = None          # rows of the state that filter u_s (none)
 
     def __init__(self, law: CertaintyEquivalentLaw, n: int):
+        super().__init__(law)
         self.lam = law.lam
         self.kp = diag_gain(law.Kp, n)[:, None]
         self.minus_kp = -self.kp
@@ -185,13 +218,13 @@ class CertaintyEquivalent:
         u += plant.regressor_times(v, v_ref, a_ref, theta_hat)
         theta_dot = plant.regressor_transpose_times(v, v_ref, a_ref, p)
         theta_dot /= -self.gamma
-        return u, theta_dot, None
+        return u, self.leak(theta_dot, theta_hat), None
 
     def estimate(self, theta_hat, state):
         return theta_hat
 
 
-class OutputFeedbackBarrier:
+class OutputFeedbackBarrier(RobustUpdate):
     """The OF configuration's barrier law on the observer's v̂ (OutputFeedbackBarrierLaw)."""
 
     state_size = 0
@@ -199,6 +232,7 @@ class OutputFeedbackBarrier:
     applied_input = None
 
     def __init__(self, law: OutputFeedbackBarrierLaw, n: int):
+        super().__init__(law)
         self.lam = law.lam
         self.minus_kp = -diag_gain(law.Kp, n)[:, None]
         self.gamma = law.gamma_theta
@@ -215,13 +249,13 @@ class OutputFeedbackBarrier:
         u += plant.regressor_times(v_hat, v_ref, a_ref, theta_hat)
         theta_dot = plant.regressor_transpose_times(v_hat, v_ref, a_ref, p_hat)
         theta_dot /= -self.gamma
-        return u, theta_dot, None
+        return u, self.leak(theta_dot, theta_hat), None
 
     def estimate(self, theta_hat, state):
         return theta_hat
 
 
-class CompositeAdaptive:
+class CompositeAdaptive(RobustUpdate):
     """(12) with the composite update on (14)–(15)'s filters; state rows [p_n (n), W_n (n·n_θ,
     row-major), u_n (n)]. `evaluate`'s rate leaves out u_s; the step adds it to the rows
     `applied_input` (CompositeAdaptiveLaw.with_applied_input)."""
@@ -229,6 +263,7 @@ class CompositeAdaptive:
     projects_estimate = True
 
     def __init__(self, law: CompositeAdaptiveLaw, n: int, n_theta: int):
+        super().__init__(law)
         self.lam, self.k_q, self.alpha = law.lam, law.k_q, law.alpha_n
         self.gamma_theta, self.gamma_n, self.nu = law.gamma_theta, law.gamma_n, law.nu
         self.minus_kp = -diag_gain(law.Kp, n)[:, None]
@@ -258,6 +293,7 @@ class CompositeAdaptive:
         theta_dot = plant.regressor_transpose_times(v, v_ref, a_ref, p)
         theta_dot /= -self.gamma_theta
         theta_dot -= gain * rmatvec(Phi, error)
+        self.leak(theta_dot, theta_hat)
         rate = np.empty_like(state)
         rate[:n] = -self.alpha * p_n + p
         rate[n: n + n * k] = (-self.alpha * W_n + W).reshape(n * k, -1)
@@ -268,13 +304,14 @@ class CompositeAdaptive:
         return theta_hat
 
 
-class OutputFeedback:
+class OutputFeedback(RobustUpdate):
     """(25)–(29); state rows [z_f (n), ξ (n)]."""
 
     projects_estimate = True
     applied_input = None
 
     def __init__(self, law: OutputFeedbackLaw, n: int):
+        super().__init__(law)
         self.n = n
         self.state_size = 2 * n
         self.k = law.k2 + 1.0
@@ -300,7 +337,7 @@ class OutputFeedback:
         eta_hat = zd_hat + z + r_f
         N_eta = matvec(frame.K_inv, c.x * eta_hat)
         theta_dot = -plant.regressor_transpose_times(w, w, w0_dot, N_eta) / self.gamma
-        return u, theta_dot, rate
+        return u, self.leak(theta_dot, theta_hat), rate
 
     def estimate(self, theta_hat, state):
         return theta_hat

@@ -8,8 +8,8 @@
 2. one classical RK4 step of the state [q, q̇, θ̂, law state, observer], the law evaluated at
    every stage on each robot's own group, and u_s, unless the operator has authority, made
    backup-safe by the governor (backup.py's govern; where it moves u_s, θ̂ holds for that
-   stage); θ̂ moves only under full machine authority, and is projected onto the parameter
-   box after the step when the last law projects;
+   stage); θ̂ moves only under full machine authority (its rate ends with the robust update's
+   leakage), and is projected onto the last law's physical box B after the step when it projects;
 3. a robot whose RK stage leaves its active group's polytope (the law has no value there), or
    whose state turns non-finite, stops, with the rows simulator.simulate records for it.
 
@@ -29,7 +29,7 @@ from .geometry import (
     select_group,
 )
 from .laws import GroupFrame, coordinates, gather, projected_reference, scatter
-from .plant import acceleration, project
+from .plant import acceleration
 from .results import Rows
 
 
@@ -138,10 +138,12 @@ class StepKernel:
         nxt += Y
         projecting = (fleet.law_role >= 0) & e.projects[fleet.law_role]
         if projecting.any():
-            cols = np.flatnonzero(projecting)
-            sel = None if cols.size == N else cols
             th = nxt[L.theta]
-            scatter(th, sel, project(gather(th, sel)))
+            for index, law in enumerate(e.distinct):         # onto each law's physical box B (RobustUpdate)
+                cols = np.flatnonzero(projecting & e.runs(index, fleet.law_role))
+                if cols.size:
+                    sel = None if cols.size == N else cols
+                    scatter(th, sel, law.project(gather(th, sel)))
         finite = np.isfinite(nxt).all(axis=0)
         going = ~escaped & finite
         fleet.Y = nxt

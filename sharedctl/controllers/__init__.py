@@ -1,4 +1,5 @@
 """Machine controllers, one law per constraint group (paper Section 3)."""
+from .adaptation import Adaptation
 from .base import LawOutput, MachineLaw
 from .certainty_equivalent import CertaintyEquivalentLaw
 from .composite_adaptive import CompositeAdaptiveLaw
@@ -8,6 +9,7 @@ from .output_feedback_barrier import OutputFeedbackBarrierLaw
 from .observer import VelocityObserver
 
 __all__ = [
+    "Adaptation",
     "LawOutput",
     "MachineLaw",
     "CertaintyEquivalentLaw",

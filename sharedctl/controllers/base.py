@@ -9,6 +9,7 @@ import numpy as np
 from ..constraints import ConstraintGroup
 from ..models import EulerLagrangeModel
 from ..transform import GroupCoordinates
+from .adaptation import Adaptation
 
 
 class LawOutput(NamedTuple):
@@ -36,6 +37,9 @@ class MachineLaw(ABC):
     #: whether θ̂ may be projected onto the model's parameter box after each step (gradient
     #: laws: yes; (13)'s θ̂ is half of an estimate θ̂ + β and its identities forbid it)
     projects_estimate: bool = True
+    #: the robust part of the update: leakage onto the trust box, the physical box (adaptation.py);
+    #: each law declares it as a field, make_controller passes the scenario's `[gains.adaptation]`
+    adaptation: Adaptation = Adaptation()
 
     @abstractmethod
     def state_size(self, model: EulerLagrangeModel) -> int:
@@ -61,6 +65,10 @@ class MachineLaw(ABC):
     def estimate(self, theta_hat: np.ndarray, state: np.ndarray) -> np.ndarray:
         """The parameter estimate this law currently stands for (θ̂, or θ̂ + β for (13))."""
         return theta_hat
+
+    def project(self, model: EulerLagrangeModel, theta_hat: np.ndarray) -> np.ndarray:
+        """θ̂ after a step: projected onto the physical box B when the law projects, else as it is."""
+        return model.project(theta_hat, self.adaptation.box(model)) if self.projects_estimate else theta_hat
 
 
 def cached_gain(owner, name: str, n: int) -> np.ndarray:

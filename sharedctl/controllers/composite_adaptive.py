@@ -25,7 +25,8 @@ With θ̃ = θ̂ − θ (so Φ θ̂ − u_n = Φ θ̃) and L = ½ (zᵀz + pᵀ 
 so §4.1's margin ε·e^{−√(2 L(0))} holds, and the normalised prediction error is square
 integrable. The normalisation bounds the update's stiffness by γ_n/ν (|Φ|² ≥ λ_max(ΦᵀΦ)),
 which keeps the 500 Hz Euler step of θ̂ stable near a face, where Φ grows like 1/x².
-docs/control.md §4.2.
+docs/control.md §4.2. The update less σ₀ (θ̂ − P_T(θ̂)) is its robust form (adaptation.py, §11):
+one more term −γ_θ σ₀ θ̃ᵀ(θ̂ − P_T(θ̂)) ≤ 0 in L̇.
 """
 from __future__ import annotations
 
@@ -36,8 +37,9 @@ import numpy as np
 
 from ..short_vectors import dot, floats
 from ..transform import reference_signals
+from .adaptation import Adaptation, leaked
 from .base import LawOutput, MachineLaw, cached_gain_floats
-from .certainty_equivalent import barrier_force
+from .certainty_equivalent import CertaintyEquivalentLaw, barrier_force
 from .non_certainty_equivalent import filtered_regressor_rows
 
 
@@ -53,6 +55,7 @@ class CompositeAdaptiveLaw(MachineLaw):
     alpha_n: float = 3.0
     gamma_n: float = 30.0
     nu: float = 1.0
+    adaptation: Adaptation = field(default_factory=Adaptation)
     name: str = field(default="nce", init=False)
     configuration: ClassVar[str] = "nce"
 
@@ -89,7 +92,8 @@ class CompositeAdaptiveLaw(MachineLaw):
         Phi = [[m - w for m, w in zip(mr, wr)] for mr, wr in zip(model.mass_regressor_rows(q, s), W_n)]
         error = [dot(row, theta) - un for row, un in zip(Phi, u_n)]                    # Φ θ̂ − u_n
         gain = self.gamma_n / (1.0 + self.nu * sum(dot(row, row) for row in Phi))
-        theta_dot = [-dot(cy, p) / self.gamma_theta - gain * dot(cp, error) for cy, cp in zip(zip(*Y), zip(*Phi))]
+        theta_dot = leaked([-dot(cy, p) / self.gamma_theta - gain * dot(cp, error)
+                            for cy, cp in zip(zip(*Y), zip(*Phi))], self.adaptation.leak(model, theta))
         rate = ([-alpha * a + b for a, b in zip(p_n, p)]
                 + [-alpha * a + b for wn, w in zip(W_n, W) for a, b in zip(wn, w)]
                 + [-alpha * a for a in u_n])
@@ -101,6 +105,14 @@ class CompositeAdaptiveLaw(MachineLaw):
         out = state_dot.copy()
         out[-n:] += u_applied
         return out
+
+    def lyapunov(self, model, group, c, q, v, theta_hat) -> float:
+        """L = ½(zᵀz + pᵀMp + γ_θ|θ̃|²) with the true θ, (12)'s (for analysis and tests only)."""
+        return CertaintyEquivalentLaw.lyapunov(self, model, group, c, q, v, theta_hat)
+
+    def error_signals(self, model, group, c, q, v):
+        """(p, ż, v_ref, v̇_ref) at one instant, (12)'s."""
+        return CertaintyEquivalentLaw.error_signals(self, model, group, c, q, v)
 
 
 def split(n: int, n_theta: int, state: list) -> tuple[list, list, list]:

@@ -17,6 +17,10 @@ This law has no term that grows near a face, so it does not keep the state insid
 it: the NCE configuration runs CompositeAdaptiveLaw (composite_adaptive.py) on the same
 filters, with (12)'s barrier (docs/control.md §4.2). It is kept as the paper's law, for the
 tests that document why.
+
+Robust form (adaptation.py, docs/control.md §11): θ̂̇ less σ₀ (ϑ − P_T(ϑ)) with ϑ = θ̂ + β the estimate
+the law stands for, so that θ̃̇ gains −σ₀ (ϑ − P_T(ϑ)) and the θ̃ part of its Lyapunov function the
+non-positive −σ₀ θ̃ᵀ(ϑ − P_T(ϑ)); θ̂ itself is never projected (`projects_estimate`).
 """
 from __future__ import annotations
 
@@ -26,6 +30,7 @@ import numpy as np
 
 from ..short_vectors import dot, floats
 from ..transform import reference_signals
+from .adaptation import Adaptation, leaked
 from .base import LawOutput, MachineLaw
 
 
@@ -45,6 +50,7 @@ class NonCertaintyEquivalentLaw(MachineLaw):
     k_q: float = 1.0
     alpha_n: float = 3.0
     gamma_n: float = 200.0
+    adaptation: Adaptation = field(default_factory=Adaptation)
     name: str = field(default="nce13", init=False)
     projects_estimate: bool = field(default=False, init=False)
 
@@ -91,8 +97,9 @@ class NonCertaintyEquivalentLaw(MachineLaw):
         estimate = [th + g * b for th, b in zip(floats(theta_hat), wp)]                    # θ̂ + β
         ws = [dot(column, s) for column in W_n_columns]                                   # W_nᵀ s
         u = [-dot(w, estimate) - g * dot(wn, ws) for w, wn in zip(W, W_n)]
-        theta_dot = [g * dot([alpha * a - b for a, b in zip(cn, cw)], p_n) + g * kq * wpj
-                     for cn, cw, wpj in zip(W_n_columns, zip(*W), wp)]
+        theta_dot = leaked([g * dot([alpha * a - b for a, b in zip(cn, cw)], p_n) + g * kq * wpj
+                            for cn, cw, wpj in zip(W_n_columns, zip(*W), wp)],
+                           self.adaptation.leak(model, estimate))                        # − σ₀(ϑ − P_T ϑ)
         p_n_dot = [-alpha * pnj + pj for pnj, pj in zip(p_n, p)]
         W_n_dot = [-alpha * a + b for wn, w in zip(W_n, W) for a, b in zip(wn, w)]
         return LawOutput(np.array(u), np.array(theta_dot), np.array(p_n_dot + W_n_dot))

@@ -16,6 +16,8 @@ z, z_f, r_f and η (the paper has k_o = 1; a scalar k_o > 0 scales the law to th
 inertia without touching the cancellation); the printed (29) is dimensionally garbled, and the cross term it must
 cancel is θ̃ᵀ Ψᵀ N η, which contains ż: we use the observer's ż̂ (40) for it (separation,
 as the paper invokes for (38)). sgn is the smooth sign tanh(·/φ). docs/control.md §4.4.
+(29) less σ₀ (θ̂ − P_T(θ̂)) is its robust form (adaptation.py, §11): −γ_θ σ₀ θ̃ᵀ(θ̂ − P_T(θ̂)) ≤ 0 more
+in the rate of that function.
 """
 from __future__ import annotations
 
@@ -26,6 +28,7 @@ from typing import ClassVar
 import numpy as np
 
 from ..short_vectors import dot, floats, matvec
+from .adaptation import Adaptation, leaked
 from .base import LawOutput, MachineLaw, cached_gain_floats
 from .smooth_sign import smooth_sign
 
@@ -40,6 +43,7 @@ class OutputFeedbackLaw(MachineLaw):
     gamma_theta: float = 0.1
     sign_width: float = 0.05
     lam: float = 1.0      # only for the selection Lyapunov value in sharing.py
+    adaptation: Adaptation = field(default_factory=Adaptation)
     name: str = field(default="of", init=False)
     configuration: ClassVar[str] = "of"
 
@@ -71,5 +75,6 @@ class OutputFeedbackLaw(MachineLaw):
         zd_hat = [kv / xj - d / xr for kv, xj, d, xr in zip(matvec(f.K, floats(v_hat)), x, cf.x_r_dot, cf.x_r)]
         eta_hat = [zdj + zj + rj for zdj, zj, rj in zip(zd_hat, z, r_f)]
         n_eta = matvec(f.K_inv, [xj * ej for xj, ej in zip(x, eta_hat)])                # N η̂
-        theta_dot = [-dot(column, n_eta) / self.gamma_theta for column in zip(*Psi)]
+        theta_dot = leaked([-dot(column, n_eta) / self.gamma_theta for column in zip(*Psi)],
+                           self.adaptation.leak(model, theta))
         return LawOutput(np.array(u), np.array(theta_dot), np.array(z_f_dot + xi_dot))

@@ -13,7 +13,8 @@ whose rate v̇_ref multiplies ẋ by ẋ_r/x_r + μ + μ′ (bounded) where (12)
 
 θ̂ projected onto the model's box after each step. With ṽ = v − v̂ = 0,
 L̇ = −λ Σ z_j tanh z_j − pᵀ K_p p ≤ 0; with ṽ ≠ 0 the residual is linear in ṽ with gains bounded
-on the set, which gives the input-to-state safety bound of docs/control.md §4.3.
+on the set, which gives the input-to-state safety bound of docs/control.md §4.3. The update less
+σ₀ (θ̂ − P_T(θ̂)) is its robust form (adaptation.py, §11): −γ_θ σ₀ θ̃ᵀ(θ̂ − P_T(θ̂)) ≤ 0 more in L̇.
 """
 from __future__ import annotations
 
@@ -24,6 +25,7 @@ import numpy as np
 
 from ..short_vectors import dot, floats, matvec
 from ..transform import bounded_reference_signals
+from .adaptation import Adaptation, leaked
 from .base import LawOutput, MachineLaw, cached_gain_floats, diag_gain
 
 _NO_STATE = np.zeros(0)
@@ -40,6 +42,7 @@ class OutputFeedbackBarrierLaw(MachineLaw):
     lam: float = 1.5
     gamma_theta: float = 0.5
     barrier_weight: float = 10.0       # k_b: extra weight of z² on the face side (z < 0) in L (N·m)
+    adaptation: Adaptation = field(default_factory=Adaptation)
     name: str = field(default="of-barrier", init=False)
     configuration: ClassVar[str] = "of"
 
@@ -66,7 +69,8 @@ class OutputFeedbackBarrierLaw(MachineLaw):
         kp, theta = cached_gain_floats(self, "Kp", model.n), floats(theta_hat)
         barrier = matvec(f.K_transposed, [wj / xj for wj, xj in zip(self.potential_slope(cf.z), cf.x)])  # Kᵀ Z1 V′(z)
         u = [-kj * pj - bj + dot(row, theta) for kj, pj, bj, row in zip(kp, p_hat, barrier, Y)]
-        theta_dot = [-dot(column, p_hat) / self.gamma_theta for column in zip(*Y)]      # −Ŷᵀ p̂ / γ_θ
+        theta_dot = leaked([-dot(column, p_hat) / self.gamma_theta for column in zip(*Y)],   # −Ŷᵀ p̂ / γ_θ
+                           self.adaptation.leak(model, theta))
         return LawOutput(np.array(u), np.array(theta_dot), _NO_STATE)
 
     def potential_slope(self, z: list) -> list:

@@ -30,22 +30,27 @@ class EulerLagrangeModel(ABC):
     parameter_names: tuple[str, ...]
     #: recommended machine-law gains for this plant's inertia scale, per law name
     default_gains: dict = {}
-    #: a box known to contain θ (physically plausible values); adaptive laws project onto it
+    #: the physical box B, known to contain θ (physically plausible values); adaptive laws project onto it
     theta_lower: tuple = ()
     theta_upper: tuple = ()
+    #: the trust box T ⊆ B (the prior: where θ is believed to lie); the laws' leakage pulls the estimate
+    #: back into it (controllers/adaptation.py, docs/control.md §11); () for B itself
+    theta_band_lower: tuple = ()
+    theta_band_upper: tuple = ()
 
-    def project(self, theta_hat: np.ndarray) -> np.ndarray:
+    def project(self, theta_hat: np.ndarray, box: tuple | None = None) -> np.ndarray:
         """Euclidean projection of an estimate onto the parameter box (identity if none is set).
 
+        `box` = (lower, upper) tuples replaces the model's own (a scenario's `[gains.adaptation]`).
         The box is convex and contains θ, so projecting never increases |θ̂ − θ|: the
         θ̃ part of a Lyapunov function cannot grow by it.
         """
-        if not self.theta_lower:
+        lower, upper = box if box is not None else (self.theta_lower, self.theta_upper)
+        if not lower:
             return theta_hat
-        bounds = _BOX_CACHE.get((self.theta_lower, self.theta_upper))
+        bounds = _BOX_CACHE.get((lower, upper))
         if bounds is None:
-            bounds = _BOX_CACHE[(self.theta_lower, self.theta_upper)] = (
-                np.asarray(self.theta_lower, float), np.asarray(self.theta_upper, float))
+            bounds = _BOX_CACHE[(lower, upper)] = (np.asarray(lower, float), np.asarray(upper, float))
         return np.minimum(np.maximum(theta_hat, bounds[0]), bounds[1])   # = np.clip, without its per-call overhead
 
     @property

@@ -158,9 +158,14 @@ class OmniRobot(EulerLagrangeModel):
     n_theta = 3
     coordinate_names = ("x", "y", "psi")
     parameter_names = ("m1", "m3", "a")
-    # a wheeled robot of up to ~200 kg: m1 (kg), m3 (kg m²), a (kg); 0 admits the paper's θ̂(0) = 0
+    # m1 (kg), m3 (kg m²), a (kg). The physical box: this robot with a payload of up to its own effective
+    # mass (m1 ≤ 36 kg: 18 kg on the 9.85 kg body), its yaw inertia and its wheels' term a = 3I_r/(2r²)
+    # at most doubled; the trust box: up to 1.5 times the nominal θ. 0 admits the paper's θ̂(0) = 0
+    # (no prior from below). docs/control.md §11
     theta_lower = (0.0, 0.0, 0.0)
-    theta_upper = (200.0, 50.0, 100.0)
+    theta_upper = (36.0, 2.4, 16.4)
+    theta_band_lower = (0.0, 0.0, 0.0)
+    theta_band_upper = (27.0, 1.8, 12.3)
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "wheel_map", WheelMap.of(self.parameters))
