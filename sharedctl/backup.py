@@ -293,9 +293,10 @@ def govern(backup: BackupModel, model, feasible, q: np.ndarray, v: np.ndarray, u
     m_g = probe.merit(g_list, _block_bounds(backup, v_list, g_list, dt))
     if not m_g >= 0.0:
         # outside the envelope (no stop from here ends δ inside whatever is sent): the one of u and
-        # u_g whose stop ends farther inside — a law braking at its barrier beats u_g, a law still
-        # tracking towards the face does not (u_g never lowers the state's margin, §10)
-        if m_u >= m_g:
+        # u_g after which the state one period on has the larger backup margin — a law braking at its
+        # barrier keeps it above u_g's (that braking is what stops the robot when nothing fails), a law
+        # still tracking towards the face does not; u_g never lowers it (§10)
+        if _next_margin(backup, feasible, q, v, a_u, dt) >= _next_margin(backup, feasible, q, v, a_g, dt):
             return Governed(u, 0.0, False)
         return Governed(model.inverse_dynamics(q, v, a_g), 1.0, False)
     step = [g - h for g, h in zip(g_list, a_u)]
@@ -307,6 +308,12 @@ def govern(backup: BackupModel, model, feasible, q: np.ndarray, v: np.ndarray, u
     share = _root(merit, m_u, m_g, backup)
     u_g = model.inverse_dynamics(q, v, a_g)
     return Governed(u + share * (u_g - u), share, True)
+
+
+def _next_margin(backup: BackupModel, feasible, q: np.ndarray, v: np.ndarray, a, dt: float) -> float:
+    """The backup margin of the state one period on under the acceleration a."""
+    a = np.asarray(a, float)
+    return backup.state_margin(feasible, q + v * dt + 0.5 * a * dt * dt, v + a * dt)
 
 
 def _root(merit, m_lo: float, m_hi: float, backup: BackupModel) -> float:

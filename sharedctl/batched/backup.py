@@ -159,7 +159,11 @@ class BackupTable:
         a_g = self.fallback_acceleration(v)
         m_g = self._merit(q, v, x, a_g, dt)
         keep = m_g >= 0.0
-        hopeless = np.flatnonzero(~keep & ~(m_u >= m_g))       # outside the envelope, u_g's stop ends farther in
+        hopeless = np.flatnonzero(~keep)                      # outside the envelope: u_g where the next state's
+        if hopeless.size:                                     # backup margin is larger after it (backup.govern)
+            qh, vh = q[:, hopeless], v[:, hopeless]
+            after_u = self._next_margin(qh, vh, a[:, hopeless], dt)
+            hopeless = hopeless[~(after_u >= self._next_margin(qh, vh, a_g[:, hopeless], dt))]
         if hopeless.size:
             sent[:, cols[hopeless]] = regressor_times(v[:, hopeless], v[:, hopeless], a_g[:, hopeless],
                                                       theta[:, hopeless])
@@ -173,6 +177,10 @@ class BackupTable:
         sent[:, cols] = u + hi * (u_g - u)
         share[cols] = hi
         return sent, share
+
+    def _next_margin(self, q, v, a, dt: float) -> np.ndarray:
+        """backup._next_margin: the backup margin of the state one period on under a."""
+        return self.state_margin(q + v * dt + 0.5 * a * dt * dt, v + a * dt)
 
     def _root(self, q, v, x, a, step, f_lo, f_hi, dt: float) -> np.ndarray:
         """backup._root for every robot: regula falsi with the Illinois rule on [lo, hi], the same
