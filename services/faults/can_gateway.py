@@ -188,7 +188,7 @@ class CanGateway:
         target = self.buses["robot" if kind == "command" else "controller"]
         if self.t0 is None or not selected(self.link.ids, kind, msg.arbitration_id):
             stream.unimpaired += 1
-            self._send(stream, target, msg, arrival)
+            self._send(stream, target, msg, arrival, impaired=False)
             return
         packed = HEADER.pack(msg.arbitration_id, 1 if msg.is_remote else 0, msg.dlc) + msg.data
         for release, payload in stream.pipe.feed(arrival - self.t0, packed):
@@ -204,8 +204,10 @@ class CanGateway:
             stream = self.streams[kind]
             self._send(stream, self.buses["robot" if kind == "command" else "controller"], payload, arrival)
 
-    def _send(self, stream: Stream, port, frame: Frame | bytes, arrival: float) -> None:
-        """Forward a frame as it came, or send one rebuilt from a pipeline payload (header + data)."""
+    def _send(self, stream: Stream, port, frame: Frame | bytes, arrival: float, impaired: bool = True) -> None:
+        """Forward a frame as it came, or send one rebuilt from a pipeline payload (header + data). The
+        latency counts only frames the pipeline held: one forwarded before arming, or outside the id
+        filter, is not delayed and would dilute the measured delay."""
         try:
             if isinstance(frame, Frame):
                 port.forward(frame)
@@ -216,7 +218,7 @@ class CanGateway:
             stream.send_errors += 1
             return
         stream.forwarded += 1
-        if self.t0 is not None and arrival >= self.t0:
+        if impaired:
             latency = time.monotonic() - arrival
             stream.latency_sum += latency
             stream.latency_n += 1

@@ -174,13 +174,14 @@ class ZenohRelay:
         with self.cond:
             now = time.monotonic()
             seq = next(self.seq[direction])
-            if self.t0 is None:
+            impaired = self.t0 is not None
+            if not impaired:
                 d.passed_unarmed += 1
                 items = [(now, payload)]
             else:
                 items = [(self.t0 + release, data) for release, data in d.pipe.feed(now - self.t0, payload)]
             for release, data in items:
-                heapq.heappush(self.heap, (release, next(self.order), direction, key, data, now, seq))
+                heapq.heappush(self.heap, (release, next(self.order), direction, key, data, now, seq, impaired))
             if items:
                 self.cond.notify()
 
@@ -192,10 +193,12 @@ class ZenohRelay:
                     self.cond.wait(timeout)
                 if not self.running:
                     return
-                _, _, direction, key, data, arrival, seq = heapq.heappop(self.heap)
-            self._publish(direction, key, data, arrival, seq)
+                _, _, direction, key, data, arrival, seq, impaired = heapq.heappop(self.heap)
+            self._publish(direction, key, data, arrival, seq, impaired)
 
-    def _publish(self, direction: str, key: str, data: bytes, arrival: float, seq: int) -> None:
+    def _publish(self, direction: str, key: str, data: bytes, arrival: float, seq: int, impaired: bool) -> None:
+        """Send on the other session; the latency is measured only for messages the pipeline held (a
+        message that arrived before arming passes at once, even when it arrived after the run's t = 0)."""
         d = self.directions[direction]
         session = self.sessions["controller" if direction == "operator" else "console"]
         try:
@@ -212,7 +215,7 @@ class ZenohRelay:
             if seq < d.max_seq:
                 d.out_of_order += 1
             d.max_seq = max(d.max_seq, seq)
-            if self.t0 is not None and arrival >= self.t0:
+            if impaired:
                 d.latency_sum += latency
                 d.latency_n += 1
                 d.latency_max = max(d.latency_max, latency)
