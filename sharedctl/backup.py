@@ -181,13 +181,17 @@ def _command_reach(backup: BackupModel, rows, v, a) -> list[float]:
     T = backup.hold
     reach = []
     for k, _, _ in rows:
-        w = _dot(k, v)
-        alpha = _dot(k, a)
-        advance = max(w * T + 0.5 * alpha * T * T, 0.0)
-        if alpha < 0.0 and 0.0 < -w / alpha < T:
-            advance = max(advance, -w * w / (2.0 * alpha))
+        advance = _hold_advance(_dot(k, v), _dot(k, a), T)
         reach.append(advance)
     return _add_braking(backup, rows, [vj + aj * T for vj, aj in zip(v, a)], reach)
+
+
+def _hold_advance(w: float, alpha: float, T: float) -> float:
+    """A row's largest advance over [0, T] at rate w and constant acceleration alpha (exact)."""
+    advance = max(w * T + 0.5 * alpha * T * T, 0.0)
+    if alpha < 0.0 and 0.0 < -w / alpha < T:
+        advance = max(advance, -w * w / (2.0 * alpha))
+    return advance
 
 
 def _add_braking(backup: BackupModel, rows, v_end, reach) -> list[float]:
@@ -218,11 +222,7 @@ def _deviating_command_reach(backup: BackupModel, rows, v, a) -> list[float]:
     dq, dv = backup.hold_deviation(_norm(v), _norm(a), T)
     reach = []
     for k, _, _ in rows:
-        w = _dot(k, v)
-        alpha = _dot(k, a)
-        advance = max(w * T + 0.5 * alpha * T * T, 0.0)
-        if alpha < 0.0 and 0.0 < -w / alpha < T:
-            advance = max(advance, -w * w / (2.0 * alpha))
+        advance = _hold_advance(_dot(k, v), _dot(k, a), T)
         reach.append(advance + _scaled(_norm(k), dq))
     return _add_deviating_braking(backup, rows, [vj + aj * T for vj, aj in zip(v, a)], dv, reach)
 
