@@ -4,36 +4,46 @@ When the controller is lost (killed, hung, its bus gone) every drive holds its l
 its watchdog expires, `hold` = T_w seconds, then disarms and its wheel's fail-safe brake stops the
 robot. A state is *backup-safe* when that stop, started now, ends inside the admissible set.
 
-The brakes are described per block of coordinates that share one speed (the omnidirectional
-robot: the translation (x, y) and the yaw ψ): whatever the direction of motion, the unpowered
-robot's speed |v_b| in block b decreases at least at a_c + k|v_b| (`BrakeBlock`), so its path from
-speed s to rest is at most
+The brakes are described per block of coordinates (the omnidirectional robot: the translation
+(x, y) and the yaw ψ; `BrakeBlock`): whatever the direction of motion, the unpowered block b
+travels at most the path of v dv/dx = −(a_c + kv) from its braking speed S_b,
 
-    s_b(s) = s/k − (a_c/k²) ln(1 + k s/a_c)          (a_c/k²… → s²/(2a_c) as k → 0),
+    s_b(S) = S/k − (a_c/k²) ln(1 + k S/a_c)          (a_c/k²… → S²/(2a_c) as k → 0),
 
-and a row j of a polytope, K_j q + T_j ≤ 0, moves towards its face by at most Σ_b |K_j,b| s_b.
+S_b = |v_b| for a block whose brakes are its own; blocks whose brakes are shared (the robot's
+wheels brake its translation and its yaw at once) bound their paths by the kinetic energy of all of
+them, S_b = √(Σ_c w_b,c |v_c|²) = √(2K/m_b) (`BrakeBlock.energy_weights`;
+models/omni_robot_stop.py). A row j of a polytope, K_j q + T_j ≤ 0, moves towards its face by at
+most Σ_b |K_j,b| s_b(S_b).
 
 Two checks, both per row of a polytope that contains q (`BackupModel`):
 
 * the **state** (q, v) is backup-safe with margin δ when, for some containing polytope,
-  x_j + Σ_b |K_j,b| (|v_b| T_w + s_b(|v_b|)) ≤ −δ for all its rows — the stop from a command that
-  does not speed the robot up;
+  x_j + Σ_b ((K_j,b v_b)⁺ T_w + |K_j,b| s_b(S_b)) ≤ −δ for all its rows — the stop from a command
+  that does not speed any block up;
 * a **command** u is backup-safe at (q, v) when holding it for T_w (row by row, exactly: constant
   acceleration a = M⁻¹(u − C v − g)) and braking from v + a T_w stays δ inside, and the state one
   control period later (q + v dt + ½a dt², v + a dt) is backup-safe.
 
-A model whose acceleration under a held torque is not constant (the 2-link arm: M(q), C and g(q)
-move during the hold) gives `BackupModel.hold_deviation`, a bound (x, y) of how far q and q̇
-depart from the constant-acceleration motion over a hold of T (`models/planar_arm_stop.py` for the
-arm); then every reach adds ‖K_j‖x to the hold's advance and brakes from speeds y higher, with
-every block's deflection taken as π, and the next state's check allows for the period's own
-deviation. Without it (the omnidirectional robot: exact) every result is the one above.
+A model whose acceleration under a held torque is not constant gives `BackupModel.hold_deviation`,
+a bound (x, y) of how far q and q̇ depart from the constant-acceleration motion over a hold of T:
+the 2-link arm (M(q), C and g(q) move during the hold; `models/planar_arm_stop.py`) one for all
+coordinates, the omnidirectional robot (its drives hold wheel torques, so the world-frame force
+turns with the robot; `models/omni_robot_stop.py`) one per block. Then every reach adds
+Σ_b |K_j,b| x_b to the hold's advance and brakes from speeds y_b higher, with every block's
+deflection taken as π, and the next state's check allows for the period's own deviation.
+
+An uncertain state (output feedback: the observer's v̂ and `BackupModel.observer_error`, per block,
+`slack`; predicted over a delay, the position too, `offset`; `uncertain_prediction`) is judged for
+every state that close: the hold advances a row by up to Σ_b |K_j,b| ε_b more per second, the
+command's acceleration (computed at v) is off by the hold deviation's `acceleration_spread` (the
+Coriolis term), and the brakes start faster.
 
 `govern` returns the command to send: u itself when it is backup-safe, else the point of the
 segment from u to the fallback u_g closest to u that is; when not even u_g is (the state is
 outside the envelope: no stop from here ends δ inside), the one of u and u_g whose stop ends
-farther inside. u_g decelerates each block along −v_b at
-max(a_c + k|v_b| + a_extra, …) — harder than the brakes — or stops it within T_w at low speed; under
+farther inside. u_g decelerates each block along −v_b at a_c + k S_b + a_extra — harder than the
+brakes — or stops it within T_w at low speed; under
 u_g the state's backup margin never decreases, so u_g is always available once the state is
 backup-safe (docs/control.md §10 for the argument). Pure: no clocks, no I/O.
 """
@@ -44,36 +54,46 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .models.omni_robot_stop import OmniStopBounds, energy_weights
 from .models.planar_arm_stop import ArmBounds, ArmHoldDeviation
 
 
 @dataclass(frozen=True)
 class BrakeBlock:
-    """Coordinates `axes` sharing one speed; the unpowered deceleration is at least a_c + k·speed."""
+    """Coordinates `axes` sharing one speed; the unpowered deceleration is at least a_c + k·speed.
+
+    With `energy_weights` (one per block of the model), the block's braking speed is
+    S_b = √(Σ_c w_c |v_c|²) instead of its own |v_b|: blocks braked by shared brakes (the robot's
+    wheels) bound their paths by the kinetic energy of all of them (models/omni_robot_stop.py)."""
 
     axes: tuple[int, ...]
     coulomb: float          # a_c (units/s²)
     viscous: float          # k (1/s)
     deflection: float = math.pi   # the most the braked velocity turns from its start (rad; π: any)
     creep: float = 0.0            # path added to every stop: a brake that fades near rest (m)
+    energy_weights: tuple = ()    # w_c per block: S_b² = Σ_c w_c |v_c|²; (): S_b = |v_b|
     cone: tuple = field(init=False, repr=False, compare=False)    # (cos, sin) of the deflection
 
     def __post_init__(self):
         if not (self.coulomb > 0.0 and self.viscous >= 0.0 and math.isfinite(self.coulomb + self.viscous)
                 and 0.0 <= self.deflection <= math.pi):
             raise ValueError("a brake block needs a_c > 0 and k >= 0, finite, and a deflection in [0, π]")
+        if not all(w > 0.0 and math.isfinite(w) for w in self.energy_weights):
+            raise ValueError("a brake block's energy weights must be positive and finite")
         object.__setattr__(self, "cone", (math.cos(self.deflection), math.sin(self.deflection)))
 
-    def advance(self, rows: list, v_block: list) -> list[float]:
+    def advance(self, rows: list, v_block: list, speed: float | None = None) -> list[float]:
         """For every row (its block part K_j,b and that part's norm, `rows` = [(k, |k|), …]), the
-        most its value grows while the brakes stop the block from v_block: s_b(|v_b|) times the
+        most its value grows while the brakes stop the block from v_block: s_b(speed) times the
         largest cosine between K_j,b and a velocity within `deflection` of v_b (the displacement
-        lies in that cone). On Python floats: a few rows, every sample."""
-        speed = math.sqrt(_dot(v_block, v_block))
+        lies in that cone). `speed`: the braking speed S_b (default |v_b|). On Python floats: a few
+        rows, every sample."""
+        own = math.sqrt(_dot(v_block, v_block))
+        speed = own if speed is None else speed
         if speed <= 0.0:
             return [0.0] * len(rows)
         reach = self.distance(speed)
-        if self.deflection >= math.pi:
+        if self.deflection >= math.pi or own <= 0.0:
             return [n * reach for _, n in rows]
         # cos(max(angle(K_j,b, v_b) − deflection, 0)), or 0 past a right angle, without acos:
         # with c = cos angle, cos(angle − d) = c cos d + sin angle sin d
@@ -83,7 +103,7 @@ class BrakeBlock:
             if n <= 0.0:
                 out.append(0.0)
                 continue
-            cosine = max(-1.0, min(1.0, _dot(k, v_block) / (n * speed)))
+            cosine = max(-1.0, min(1.0, _dot(k, v_block) / (n * own)))
             if cosine >= cos_d:
                 out.append(n * reach)
                 continue
@@ -100,6 +120,16 @@ class BrakeBlock:
             return speed * speed / (2.0 * a) + self.creep
         return speed / k - (a / (k * k)) * math.log1p(k * speed / a) + self.creep
 
+    def braking_speed(self, b: int, speeds: list) -> float:
+        """S_b from every block's speed (`speeds`, this block's at index b)."""
+        w = self.energy_weights
+        if not w:
+            return speeds[b]
+        total = w[0] * speeds[0] * speeds[0]
+        for wc, sc in zip(w[1:], speeds[1:]):
+            total = total + wc * sc * sc
+        return math.sqrt(total)
+
 
 @dataclass(frozen=True)
 class BackupModel:
@@ -110,34 +140,47 @@ class BackupModel:
     margin: float = 0.01                 # δ (m): how far inside the stop must end
     extra_deceleration: float = 1.0      # a_extra: the fallback brakes this much harder than the brakes
     iterations: int = 12                 # govern's most probes between u and u_g
-    # (‖v‖, ‖a‖, T) → (x, y): ‖q(t) − q − vt − ½at²‖ ≤ x and ‖q̇(t) − v − at‖ ≤ y for t ≤ T while the torque
-    # of acceleration a is held, nondecreasing in each argument; None: the held acceleration is constant
+    # while the torque of acceleration a is held, the motion's departure from q + vt + ½at², nondecreasing in
+    # each argument (None: the held acceleration is constant). Either a callable (‖v‖, ‖a‖, T) → (x, y),
+    # ‖q(t) − q − vt − ½at²‖ ≤ x and ‖q̇(t) − v − at‖ ≤ y for t ≤ T (one bound for every block), or an object
+    # whose by_block(speeds, accelerations, T) → ((x_b …), (y_b …)) bounds each block's part from each
+    # block's |v_b| and |a_b|; an object with acceleration_spread(speeds, slacks) may judge uncertain velocities
     hold_deviation: object = None
+    # the output-feedback envelope: the observer's error |v_b − v̂_b| is at most this per block (m/s, rad/s);
+    # the governor and the speed-aware rows judge every velocity that close to v̂ (): v̂ is taken as exact
+    observer_error: tuple = ()
 
     def __post_init__(self):
         if not (self.hold >= 0.0 and self.margin >= 0.0 and self.extra_deceleration > 0.0):
             raise ValueError("backup: hold >= 0, margin >= 0 and extra_deceleration > 0 are required")
+        if any(b.energy_weights and len(b.energy_weights) != len(self.blocks) for b in self.blocks):
+            raise ValueError("backup: a block's energy weights need one weight per block")
+        if self.observer_error and not (len(self.observer_error) == len(self.blocks) and self.accepts_slack()
+                                        and all(e >= 0.0 and math.isfinite(e) for e in self.observer_error)):
+            raise ValueError("backup: an observer error needs one finite bound >= 0 per block and a hold deviation "
+                             "that bounds the acceleration's spread")
 
     # ----- reach: how far each row may still move towards its face -------------------------
-    def state_reach(self, K, v) -> list[float]:
-        """(K_j v)⁺ T_w + Σ_b advance_b for every row of K: the fallback held T_w (it decelerates
-        along −v, so a row advances at most (K_j v)⁺ T_w), then the brakes from v."""
-        return _state_reach(self, _rows_of(self, K), _as_floats(v))
+    def state_reach(self, K, v, slack=None) -> list[float]:
+        """Σ_b (K_j,b v_b)⁺ T_w + the brakes' advance for every row of K: the fallback held T_w (it
+        decelerates each block along −v_b, so a row advances at most Σ_b (K_j,b v_b)⁺ T_w while it is
+        held), then the brakes from v. With `slack` (per block), for every velocity that close to v."""
+        return _state_reach(self, _rows_of(self, K), _as_floats(v), _slack(slack, self))
 
-    def command_reach(self, K, v, a) -> list[float]:
+    def command_reach(self, K, v, a, slack=None) -> list[float]:
         """Holding the acceleration a for T_w (each row's largest advance, exact for constant a), then
         braking from v + a T_w."""
-        return _command_reach(self, _rows_of(self, K), _as_floats(v), _as_floats(a))
+        return _command_reach(self, _rows_of(self, K), _as_floats(v), _as_floats(a), _slack(slack, self))
 
-    def state_margin(self, feasible, q, v) -> float:
+    def state_margin(self, feasible, q, v, slack=None) -> float:
         """max over the polytopes containing q of min_j −(x_j + reach_j): ≥ δ means backup-safe
         (−inf when no polytope contains q)."""
-        v = _as_floats(v)
-        return self._margin(feasible, q, lambda rows: _state_reach(self, rows, v))
+        v, slack = _as_floats(v), _slack(slack, self)
+        return self._margin(feasible, q, lambda rows: _state_reach(self, rows, v, slack))
 
-    def command_margin(self, feasible, q, v, a) -> float:
-        v, a = _as_floats(v), _as_floats(a)
-        return self._margin(feasible, q, lambda rows: _command_reach(self, rows, v, a))
+    def command_margin(self, feasible, q, v, a, slack=None) -> float:
+        v, a, slack = _as_floats(v), _as_floats(a), _slack(slack, self)
+        return self._margin(feasible, q, lambda rows: _command_reach(self, rows, v, a, slack))
 
     def _margin(self, feasible, q, reach_of) -> float:
         q = _as_floats(q)
@@ -149,40 +192,103 @@ class BackupModel:
         return best
 
     def fallback_acceleration(self, v: np.ndarray) -> np.ndarray:
-        """a_g: each block decelerated along −v_b at a_c + k|v_b| + a_extra, or stopped within T_w
-        when that is gentler (no reversal during the hold)."""
+        """a_g: each block decelerated along −v_b at a_c + k S_b + a_extra (S_b its braking speed), or
+        stopped within T_w when that is gentler (no reversal during the hold)."""
         a = np.zeros_like(v)
-        for block in self.blocks:
-            axes = list(block.axes)
-            speed = _norm(v[axes].tolist())
+        v_list = v.tolist()
+        speeds = _block_speeds(self, v_list)
+        for block, speed, decel in zip(self.blocks, speeds, _fallback_decelerations(self, speeds)):
             if speed <= 0.0:
                 continue
-            decel = block.coulomb + block.viscous * speed + self.extra_deceleration
-            if self.hold > 0.0:
-                decel = min(decel, speed / self.hold)
+            axes = list(block.axes)
             a[axes] = -decel * v[axes] / speed
         return a
 
+    def accepts_slack(self) -> bool:
+        """Can this model judge an uncertain velocity (its hold deviation bounds the acceleration's spread)?"""
+        return hasattr(self.hold_deviation, "acceleration_spread")
 
-def _state_reach(backup: BackupModel, rows, v, slack: float = 0.0) -> list[float]:
-    """BackupModel.state_reach on rows as `_rows_of` gives them and v as floats (with a hold
-    deviation: for every velocity within `slack` of v)."""
-    if backup.hold_deviation is not None:
-        return _deviating_state_reach(backup, rows, v, slack)
+
+def _slack(slack, backup: BackupModel | None = None) -> list | None:
+    """A caller's slack per block as floats (None: v is exact); only a model that `accepts_slack`
+    takes one."""
+    if slack is None:
+        return None
+    if backup is not None and not backup.accepts_slack():
+        raise ValueError("backup: this model's hold deviation cannot bound an uncertain velocity's acceleration")
+    return [float(e) for e in slack]
+
+
+def _block_speeds(backup: BackupModel, v: list) -> list[float]:
+    """|v_b| per block."""
+    return [_norm([v[i] for i in block.axes]) for block in backup.blocks]
+
+
+def _fallback_decelerations(backup: BackupModel, speeds: list) -> list[float]:
+    """The fallback's deceleration per block at block speeds `speeds`: min(a_c + k S_b + a_extra,
+    |v_b| / T_w). Nondecreasing in every speed."""
+    out = []
+    for b, block in enumerate(backup.blocks):
+        decel = block.coulomb + block.viscous * block.braking_speed(b, speeds) + backup.extra_deceleration
+        if backup.hold > 0.0:
+            decel = min(decel, speeds[b] / backup.hold)
+        out.append(decel)
+    return out
+
+
+def _deviation(backup: BackupModel, speeds: list, accelerations: list, duration: float) -> tuple[list, list]:
+    """(x_b, y_b) per block of `BackupModel.hold_deviation` over `duration` from block speeds and
+    accelerations at most `speeds` and `accelerations` (zeros without one)."""
+    deviation = backup.hold_deviation
+    if deviation is None:
+        zeros = [0.0] * len(speeds)
+        return zeros, zeros
+    by_block = getattr(deviation, "by_block", None)
+    if by_block is not None:
+        xs, ys = by_block(speeds, accelerations, duration)
+        return list(xs), list(ys)
+    x, y = deviation(_norm(speeds), _norm(accelerations), duration)
+    return [x] * len(speeds), [y] * len(speeds)
+
+
+def _spread(backup: BackupModel, speeds: list, slack: list | None) -> list[float]:
+    """η_b: the most the acceleration of a fixed command moves per block when the velocity moves by
+    `slack` from one with block speeds `speeds`. Zeros without a slack, and for a model without
+    `acceleration_spread`: its slacks are only the period's own deviation, from a velocity at which
+    the next sample computes its commands."""
+    spread = getattr(backup.hold_deviation, "acceleration_spread", None)
+    if slack is None or spread is None:
+        return [0.0] * len(speeds)
+    return list(spread(speeds, slack))
+
+
+def _state_reach(backup: BackupModel, rows, v, slack: list | None = None, offset: list | None = None,
+                 estimated: bool = True) -> list[float]:
+    """BackupModel.state_reach on rows as `_rows_of` gives them and v as floats; with a hold
+    deviation, a slack or an offset, `_uncertain_state_reach`."""
+    if backup.hold_deviation is not None or slack is not None or offset is not None:
+        return _uncertain_state_reach(backup, rows, v, slack, offset, estimated)
     T = backup.hold
-    reach = [max(_dot(k, v), 0.0) * T for k, _, _ in rows]
+    blocks = [[v[i] for i in block.axes] for block in backup.blocks]
+    reach = []
+    for _, _, parts in rows:
+        advance = max(_dot(parts[0][0], blocks[0]), 0.0) * T
+        for b in range(1, len(blocks)):
+            advance += max(_dot(parts[b][0], blocks[b]), 0.0) * T
+        reach.append(advance)
     return _add_braking(backup, rows, v, reach)
 
 
-def _command_reach(backup: BackupModel, rows, v, a) -> list[float]:
-    """BackupModel.command_reach on rows as `_rows_of` gives them and v, a as floats."""
-    if backup.hold_deviation is not None:
-        return _deviating_command_reach(backup, rows, v, a)
+def _command_reach(backup: BackupModel, rows, v, a, slack: list | None = None,
+                   offset: list | None = None) -> list[float]:
+    """BackupModel.command_reach on rows as `_rows_of` gives them and v, a as floats; with a hold
+    deviation, a slack or an offset, `_uncertain_command_reach`."""
+    if backup.hold_deviation is not None or slack is not None or offset is not None:
+        return _uncertain_command_reach(backup, rows, v, a, slack, offset)
     T = backup.hold
     reach = []
     for k, _, _ in rows:
-        advance = _hold_advance(_dot(k, v), _dot(k, a), T)
-        reach.append(advance)
+        reach.append(_hold_advance(_dot(k, v), _dot(k, a), T))
     return _add_braking(backup, rows, [vj + aj * T for vj, aj in zip(v, a)], reach)
 
 
@@ -196,43 +302,146 @@ def _hold_advance(w: float, alpha: float, T: float) -> float:
 
 def _add_braking(backup: BackupModel, rows, v_end, reach) -> list[float]:
     """reach + each brake block's advance from v_end, row by row."""
+    blocks = [[v_end[i] for i in block.axes] for block in backup.blocks]
+    speeds = [_norm(part) for part in blocks]
     for b, block in enumerate(backup.blocks):
-        extra = block.advance([parts[b] for _, _, parts in rows], [v_end[i] for i in block.axes])
+        extra = block.advance([parts[b] for _, _, parts in rows], blocks[b], block.braking_speed(b, speeds))
         reach = [r + e for r, e in zip(reach, extra)]
     return reach
 
 
-# ----- a hold that departs from constant acceleration (BackupModel.hold_deviation) ------------
-def _deviating_state_reach(backup: BackupModel, rows, v, slack: float) -> list[float]:
-    """The state's reach for every velocity v' with ‖v' − v‖ ≤ slack: the fallback u_g held T_w
-    (its constant-acceleration part advances a row at most (K_j v')⁺ T_w ≤ ((K_j v)⁺ + ‖K_j‖ slack) T_w,
-    its deviation at most ‖K_j‖ x), then the brakes from block speeds |v_b| + slack + y (deflection π);
-    (x, y) the deviation of a hold of T_w from speed ‖v‖ + slack at the fallback's largest acceleration."""
-    T = backup.hold
-    speed = _norm(v) + slack
-    dq, dv = backup.hold_deviation(speed, _fallback_size(backup, speed), T)
-    reach = [(max(_dot(k, v), 0.0) + _norm(k) * slack) * T + _scaled(_norm(k), dq) for k, _, _ in rows]
-    return _add_deviating_braking(backup, rows, v, slack + dv, reach)
+# ----- a hold that departs from constant acceleration, an uncertain velocity ----------------
+# Each reach is a plan — what depends on (v, a) alone, computed once — applied row by row.
+def _uncertain_state_reach(backup: BackupModel, rows, v, slack: list | None, offset: list | None,
+                           estimated: bool = True) -> list[float]:
+    """The state's reach for every velocity v' with |v'_b − v_b| ≤ ε_b (`slack`, 0 without) and every
+    position within p_b (`offset`, 0 without) — which adds Σ_b |K_j,b| p_b to every row — : the
+    fallback u_g held T_w — its constant-acceleration part advances a row at most
+    Σ_b ((K_j,b v_b)⁺ + |K_j,b| ε_b) T_w + ½|K_j,b| η_b T_w², its deviation at most Σ_b |K_j,b| x_b — then the
+    brakes from block speeds |v_b| + ε_b + η_b T_w + y_b (deflection π where any of these is uncertain);
+    (x, y) the deviation of a hold of T_w from speeds |v_b| + ε_b at the fallback's deceleration there
+    plus η. `estimated`: u_g is computed at v (an estimate), so its acceleration at v' is off by the
+    spread η over the slack; else (the slack of the next state under state feedback, whose own
+    sample computes u_g at its velocity) η = 0."""
+    blocks = _parts(backup, v)
+    speeds = [_norm(part) for part in blocks]
+    plan = _planned(backup, _state_head(backup, speeds, slack, offset, estimated), blocks, speeds)
+    return _state_rows(backup, plan, rows, blocks)
 
 
-def _deviating_command_reach(backup: BackupModel, rows, v, a) -> list[float]:
-    """The command's reach: each row's largest advance under the constant acceleration a over T_w,
-    plus ‖K_j‖ x; then the brakes from block speeds |v_b + a_b T_w| + y (deflection π)."""
+def _parts(backup: BackupModel, v: list) -> list[list[float]]:
+    """v's part per block."""
+    return [[v[i] for i in block.axes] for block in backup.blocks]
+
+
+def _state_head(backup: BackupModel, speeds, slack, offset, estimated: bool) -> tuple:
+    """What `_state_rows` needs besides the rows, v and the brakes: (T_w, ε, η, x, the spread of the
+    braking speeds), from block speeds `speeds` (|v_b|, or bounds of them: every term is nondecreasing
+    in them)."""
     T = backup.hold
-    dq, dv = backup.hold_deviation(_norm(v), _norm(a), T)
+    n = len(backup.blocks)
+    eps = slack if slack is not None else [0.0] * n
+    eta = _spread(backup, speeds, slack) if estimated else [0.0] * n
+    top = [s + e for s, e in zip(speeds, eps)]
+    dq, dv = _deviation(backup, top, [d + h for d, h in zip(_fallback_decelerations(backup, top), eta)], T)
+    if offset is not None:
+        dq = [x + p for x, p in zip(dq, offset)]
+    return T, eps, eta, dq, [e + h * T + y for e, h, y in zip(eps, eta, dv)]
+
+
+def _planned(backup: BackupModel, head: tuple, blocks, speeds) -> tuple:
+    """A head (`_state_head`, `_command_head`) and the brakes' plan from the block velocities `blocks`
+    (speeds `speeds`) it spreads: what `_state_rows` and `_command_rows` take."""
+    T, eps, eta, dq, spread = head
+    return T, eps, eta, dq, _braking_plan(backup, blocks, speeds, spread)
+
+
+def _state_rows(backup: BackupModel, plan, rows, blocks) -> list[float]:
+    T, eps, eta, dq, braking = plan
+    n = len(blocks)
     reach = []
-    for k, _, _ in rows:
-        advance = _hold_advance(_dot(k, v), _dot(k, a), T)
-        reach.append(advance + _scaled(_norm(k), dq))
-    return _add_deviating_braking(backup, rows, [vj + aj * T for vj, aj in zip(v, a)], dv, reach)
+    for _, _, parts in rows:
+        total = 0.0
+        for b in range(n):
+            k, norm = parts[b]
+            total += (max(_dot(k, blocks[b]), 0.0) + norm * eps[b]) * T + 0.5 * norm * eta[b] * T * T \
+                + _scaled(norm, dq[b])
+        reach.append(total)
+    return _apply_braking(backup, braking, rows, reach)
 
 
-def _add_deviating_braking(backup: BackupModel, rows, v_end, spread: float, reach) -> list[float]:
-    """reach + Σ_b |K_j,b| s_b(|v_end,b| + spread): the braked path from any velocity within
-    `spread` of v_end, whose direction the deviation leaves free (deflection π)."""
+def _uncertain_command_reach(backup: BackupModel, rows, v, a, slack: list | None, offset: list | None) -> list[float]:
+    """The command's reach for every velocity within ε_b (`slack`) of v and every position within p_b
+    (`offset`, adding Σ_b |K_j,b| p_b): each row's largest advance
+    under the constant acceleration a over T_w with K_j v raised by Σ_b |K_j,b| ε_b and K_j a by
+    Σ_b |K_j,b| η_b (exact for the raised line, which lies above every such motion), plus Σ_b |K_j,b| x_b;
+    then the brakes from block speeds |v_b + a_b T_w| + ε_b + η_b T_w + y_b."""
+    return _command_rows(backup, _command_plan(backup, v, a, slack, offset), rows, v, a)
+
+
+def _command_plan(backup: BackupModel, v, a, slack, offset, head: tuple | None = None) -> tuple:
+    """`_command_head` (or the one given) and the brakes' plan from v + a T_w."""
+    if head is None:
+        head = _command_head(backup, _block_speeds(backup, v), _block_speeds(backup, a), slack, offset)
+    ends = _parts(backup, [vj + aj * head[0] for vj, aj in zip(v, a)])
+    return _planned(backup, head, ends, [_norm(part) for part in ends])
+
+
+def _command_head(backup: BackupModel, speeds, accelerations, slack, offset) -> tuple:
+    """What `_command_rows` needs besides the rows, v, a and the brakes: (T_w, ε, η, x, the spread of
+    the braking speeds), from block speeds |v_b| and the block accelerations |a_b| (or bounds of them:
+    every term is nondecreasing in them)."""
+    T = backup.hold
+    n = len(backup.blocks)
+    eps = slack if slack is not None else [0.0] * n
+    eta = _spread(backup, speeds, slack)
+    dq, dv = _deviation(backup, [s + e for s, e in zip(speeds, eps)],
+                        [h + al for h, al in zip(eta, accelerations)], T)
+    if offset is not None:
+        dq = [x + p for x, p in zip(dq, offset)]
+    return T, eps, eta, dq, [e + h * T + y for e, h, y in zip(eps, eta, dv)]
+
+
+def _command_rows(backup: BackupModel, plan, rows, v, a) -> list[float]:
+    T, eps, eta, dq, braking = plan
+    n = len(eps)
+    reach = []
+    for k, _, parts in rows:
+        w = _dot(k, v)
+        alpha = _dot(k, a)
+        held = 0.0
+        for b in range(n):
+            norm = parts[b][1]
+            w += norm * eps[b]
+            alpha += norm * eta[b]
+            held += _scaled(norm, dq[b])
+        reach.append(_hold_advance(w, alpha, T) + held)
+    return _apply_braking(backup, braking, rows, reach)
+
+
+def _braking_plan(backup: BackupModel, blocks, speeds, spread) -> list:
+    """Per block, how the brakes advance a row from block velocities `blocks` (speeds `speeds`) each
+    known to within `spread`: from speeds |v_b| + spread_b, in any direction where spread_b > 0
+    (deflection π) — (path, None) — in the block's cone around v_b where it is 0 — (speed, v_b)."""
+    top = [s + e for s, e in zip(speeds, spread)]
+    plan = []
     for b, block in enumerate(backup.blocks):
-        path = _braked_path(block, _norm([v_end[i] for i in block.axes]) + spread)
-        reach = [r + _scaled(parts[b][1], path) for r, (_, _, parts) in zip(reach, rows)]
+        speed = block.braking_speed(b, top)
+        if spread[b] > 0.0 or block.deflection >= math.pi:
+            plan.append((_braked_path(block, speed), None))
+        else:
+            plan.append((speed, blocks[b]))
+    return plan
+
+
+def _apply_braking(backup: BackupModel, plan, rows, reach) -> list[float]:
+    """reach + Σ_b the brakes' advance of `_braking_plan`, block by block."""
+    for b, (block, (value, direction)) in enumerate(zip(backup.blocks, plan)):
+        if direction is None:
+            reach = [r + _scaled(parts[b][1], value) for r, (_, _, parts) in zip(reach, rows)]
+        else:
+            extra = block.advance([parts[b] for _, _, parts in rows], direction, value)
+            reach = [r + e for r, e in zip(reach, extra)]
     return reach
 
 
@@ -246,18 +455,6 @@ def _scaled(norm: float, length: float) -> float:
     return norm * length if norm > 0.0 else 0.0
 
 
-def _fallback_size(backup: BackupModel, speed: float) -> float:
-    """The largest ‖a_g‖ of `fallback_acceleration` over velocities of norm ≤ speed (each block's
-    deceleration grows with its speed, which is at most ‖v‖)."""
-    total = 0.0
-    for block in backup.blocks:
-        decel = block.coulomb + block.viscous * speed + backup.extra_deceleration
-        if backup.hold > 0.0:
-            decel = min(decel, speed / backup.hold)
-        total += decel * decel
-    return math.sqrt(total)
-
-
 @dataclass(frozen=True)
 class Governed:
     """What `govern` decided: the command to send and how far it moved from the one asked for."""
@@ -268,8 +465,10 @@ class Governed:
 
 
 def govern(backup: BackupModel, model, feasible, q: np.ndarray, v: np.ndarray, u: np.ndarray,
-           dt: float) -> Governed:
-    """The backup-safe command closest to u on the segment u → u_g.
+           dt: float, slack=None, offset=None) -> Governed:
+    """The backup-safe command closest to u on the segment u → u_g; with `slack` and `offset` (per
+    block), a command backup-safe for every velocity within the slack of v and every position within
+    the offset of q (an estimate: output feedback, `uncertain_prediction`).
 
     Most samples are far from every face for their speed: a bound that needs only each polytope's
     smallest slack (`_clearly_safe`) accepts u there without the row-by-row reaches. Elsewhere the
@@ -279,41 +478,79 @@ def govern(backup: BackupModel, model, feasible, q: np.ndarray, v: np.ndarray, u
     the Illinois rule (`_root`): the acceleration is affine in the command, so a(λ) = a_u + λ(a_g − a_u)
     costs no model call; the safe end of the bracket is sent."""
     q, v, u = np.asarray(q, float), np.asarray(v, float), np.asarray(u, float)
-    q_list, v_list = q.tolist(), v.tolist()
+    q_list, v_list, slack, offset = q.tolist(), v.tolist(), _slack(slack, backup), _slack(offset)
     a_u = model.acceleration(q, v, u).tolist()
-    bounds = _block_bounds(backup, v_list, a_u, dt)
+    bounds = _block_bounds(backup, v_list, a_u, dt, slack, offset)
     if _clearly_safe(backup, feasible, q_list, bounds) >= backup.margin:
         return Governed(u, 0.0, True)
-    probe = _Probe(backup, feasible, q_list, v_list, dt)
+    probe = _Probe(backup, feasible, q_list, v_list, dt, slack, offset)
     m_u = probe.merit(a_u, bounds)
     if m_u >= 0.0:
         return Governed(u, 0.0, True)
     a_g = backup.fallback_acceleration(v)
     g_list = a_g.tolist()
-    m_g = probe.merit(g_list, _block_bounds(backup, v_list, g_list, dt))
+    m_g = probe.merit(g_list, _block_bounds(backup, v_list, g_list, dt, slack, offset))
     if not m_g >= 0.0:
         # outside the envelope (no stop from here ends δ inside whatever is sent): the one of u and
         # u_g after which the state one period on has the larger backup margin — a law braking at its
         # barrier keeps it above u_g's (that braking is what stops the robot when nothing fails), a law
         # still tracking towards the face does not; u_g never lowers it (§10)
-        if _next_margin(backup, feasible, q, v, a_u, dt) >= _next_margin(backup, feasible, q, v, a_g, dt):
+        if (_next_margin(backup, feasible, q, v, a_u, dt, slack)
+                >= _next_margin(backup, feasible, q, v, a_g, dt, slack)):
             return Governed(u, 0.0, False)
         return Governed(model.inverse_dynamics(q, v, a_g), 1.0, False)
-    step = [g - h for g, h in zip(g_list, a_u)]
-
-    def merit(lam: float) -> float:
-        a = [h + lam * s for h, s in zip(a_u, step)]
-        return probe.merit(a, _block_bounds(backup, v_list, a, dt))
-
-    share = _root(merit, m_u, m_g, backup)
+    share = _root(probe.along(a_u, g_list), m_u, m_g, backup)
     u_g = model.inverse_dynamics(q, v, a_g)
     return Governed(u + share * (u_g - u), share, True)
 
 
-def _next_margin(backup: BackupModel, feasible, q: np.ndarray, v: np.ndarray, a, dt: float) -> float:
-    """The backup margin of the state one period on under the acceleration a."""
+def uncertain_prediction(backup: BackupModel, model, q, v, slack, commands, dt: float):
+    """(q, v, slack, offset) after `commands` (oldest first), each held dt, from a state whose velocity
+    is known to within `slack` per block (the observer's v̂ and `BackupModel.observer_error`): q and v
+    are stepped as shared_controller.predict steps them (the model's acceleration at the period's
+    start, held), and per period the slack grows by the acceleration's spread and the hold's deviation,
+    ε ← ε + η dt + y, the offset — how far q may be from the prediction — by p ← p + ε dt + ½η dt² + x
+    (η = acceleration_spread at the period's largest speeds, (x, y) the deviation over dt from speeds
+    |v_b| + ε_b and accelerations |a_b| + η_b). What it leaves out is what `predict` leaves out: the
+    plant's friction and its parameters against the model's."""
+    q, v = np.asarray(q, float), np.asarray(v, float)
+    eps = [float(e) for e in slack]
+    offset = [0.0] * len(backup.blocks)
+    half = 0.5 * dt * dt
+    for u in commands:
+        a = model.acceleration(q, v, u)
+        v_list, a_list = v.tolist(), a.tolist()
+        speeds = _block_speeds(backup, v_list)
+        accelerations = [_norm([a_list[i] for i in block.axes]) for block in backup.blocks]
+        fastest = [s + al * dt for s, al in zip(speeds, accelerations)]
+        period = (speeds, accelerations, fastest, eps, dt)
+        # a bound the slack cannot leave over the period: one that `_grown` maps below itself (everything is
+        # nondecreasing in it, so the slack, starting below it, stays below)
+        bound = [e + 2.0 * (g - e) for e, g in zip(eps, _grown(backup, period, _grown(backup, period, eps)[0])[0])]
+        while any(g > b for g, b in zip(_grown(backup, period, bound)[0], bound)):
+            bound = [e + 2.0 * (b - e) + 1e-12 for e, b in zip(eps, bound)]
+        end, eta, dq = _grown(backup, period, bound)
+        offset = [p + e * dt + 0.5 * h * dt * dt + x for p, e, h, x in zip(offset, eps, eta, dq)]
+        eps = end
+        q = q + dt * v + half * a
+        v = v + dt * a
+    return q, v, eps, offset
+
+
+def _grown(backup: BackupModel, period, bound: list):
+    """One period of `uncertain_prediction` from slack ε, if the slack stays within `bound` over it:
+    (the slack at its end, the acceleration's spread η at the bound, the deviation x)."""
+    speeds, accelerations, fastest, eps, dt = period
+    eta = _spread(backup, fastest, bound)
+    dq, dv = _deviation(backup, [s + e for s, e in zip(speeds, eps)], [al + h for al, h in zip(accelerations, eta)], dt)
+    return [e + h * dt + y for e, h, y in zip(eps, eta, dv)], eta, dq
+
+
+def _next_margin(backup: BackupModel, feasible, q: np.ndarray, v: np.ndarray, a, dt: float, slack=None) -> float:
+    """The backup margin of the state one period on under the acceleration a (with `slack`, of every
+    velocity that close to it)."""
     a = np.asarray(a, float)
-    return backup.state_margin(feasible, q + v * dt + 0.5 * a * dt * dt, v + a * dt)
+    return backup.state_margin(feasible, q + v * dt + 0.5 * a * dt * dt, v + a * dt, slack)
 
 
 def _root(merit, m_lo: float, m_hi: float, backup: BackupModel) -> float:
@@ -353,67 +590,156 @@ class _Probe:
     taken as that bound, −(x_j + Σ_b |K_j,b| C_b) ≥ δ, and its exact reach is not computed; the
     rows near a face are computed exactly. The merit's sign is exact; its value, where it is ≥ 0,
     may be a lower row's bound. When the command margin fails (< δ), the merit is that margin
-    less δ: its sign is all the governor decides on."""
+    less δ: its sign is all the governor decides on.
 
-    __slots__ = ("backup", "regions", "q", "v", "dt")
+    `along(a_u, a_g)` gives the root search its merit(λ) on the segment a(λ) = a_u + λ(a_g − a_u).
+    With a hold deviation or a slack, the hold's deviation terms — which depend on a only through the
+    block norms |a_b|, and for the next state's stop through the block speeds |v_b + a_b dt| — and the
+    crude bounds are computed once, at the largest of those norms on the segment (each is convex in λ,
+    so it is the larger of its values at the two ends); every term is nondecreasing in them, so each
+    probe's merit is a lower bound of its exact merit (what it passes, the exact merit passes). The
+    braking speeds, which decide the most, stay exact: a probe costs the brakes' plan and the near
+    rows' dot products. The bounds only sort rows (a larger one computes more rows exactly)."""
 
-    def __init__(self, backup: BackupModel, feasible, q: list, v: list, dt: float):
-        self.backup, self.q, self.v, self.dt = backup, q, v, dt
+    __slots__ = ("backup", "regions", "q", "v", "dt", "slack", "offset", "uncertain", "speeds", "eps", "eta")
+
+    def __init__(self, backup: BackupModel, feasible, q: list, v: list, dt: float, slack: list | None = None,
+                 offset: list | None = None):
+        self.backup, self.q, self.v, self.dt, self.slack, self.offset = backup, q, v, dt, slack, offset
         self.regions = [(rows, [_dot(k, q) + t for k, t, _ in rows]) for rows in _region_rows(backup, feasible)]
+        self.uncertain = backup.hold_deviation is not None or slack is not None or offset is not None
+        if self.uncertain:
+            self.speeds = _block_speeds(backup, v)
+            self.eps = slack if slack is not None else [0.0] * len(backup.blocks)
+            self.eta = _spread(backup, self.speeds, slack)
 
     def merit(self, a: list, bounds: list) -> float:
-        backup, q, v, dt = self.backup, self.q, self.v, self.dt
-        delta = backup.margin
+        return self._merit(a, self._split(bounds), None)
+
+    def along(self, a_u: list, a_g: list):
+        """merit(λ) of a(λ) = a_u + λ(a_g − a_u) (see the class)."""
+        step = [g - h for g, h in zip(a_g, a_u)]
+
+        def at(lam: float) -> list:
+            return [h + lam * d for h, d in zip(a_u, step)]
+
+        if not self.uncertain:
+            backup, v, dt = self.backup, self.v, self.dt
+            return lambda lam: self.merit(at(lam), _block_bounds(backup, v, at(lam), dt))
+        fixed = self._segment(a_u, a_g)
+        return lambda lam: self._merit(at(lam), fixed[0], fixed)
+
+    def _segment(self, a_u: list, a_g: list) -> tuple:
+        """(split, command head, next-state moves, next-state slack, next-state head) at the segment's
+        largest norms."""
+        backup, v, dt = self.backup, self.v, self.dt
+        held = [max(x, y) for x, y in zip(_block_speeds(backup, a_u), _block_speeds(backup, a_g))]
+        fastest = [max(x, y) for x, y in zip(_block_speeds(backup, [vi + ai * dt for vi, ai in zip(v, a_u)]),
+                                             _block_speeds(backup, [vi + ai * dt for vi, ai in zip(v, a_g)]))]
+        command = _command_head(backup, self.speeds, held, self.slack, self.offset)
+        moved, slack1 = self._next_uncertainty(held)
+        state = _state_head(backup, fastest, slack1, None, self.slack is not None)
+        bounds = _uncertain_bounds_at(backup, self.speeds, held, dt, self.slack, self.offset)
+        return self._split(bounds), command, moved, slack1, state
+
+    def _split(self, bounds: list) -> list:
+        """Per polytope (rows, row values, the near rows, their subset, far): `far` the least bound of
+        the rows that cannot decide."""
+        delta = self.backup.margin
         crude_of = _crude_rows(bounds)
-        command = -math.inf
         split = []
         for rows, x in self.regions:
-            crude = crude_of(rows)
-            near, far = [], math.inf          # far: the least bound of the rows that cannot decide
-            for j, (xj, cj) in enumerate(zip(x, crude)):
+            near, far = [], math.inf
+            for j, (xj, cj) in enumerate(zip(x, crude_of(rows))):
                 if xj + cj > -delta:
                     near.append(j)
                 else:
                     far = min(far, -(xj + cj))
-            split.append((rows, near, far))
+            split.append((rows, x, near, [rows[j] for j in near], far))
+        return split
+
+    def _merit(self, a: list, split: list, fixed) -> float:
+        backup, q, v, dt, slack, offset = self.backup, self.q, self.v, self.dt, self.slack, self.offset
+        delta = backup.margin
+        command = -math.inf
+        plan = None                       # the command's reach plan, made once for every polytope
+        for _, x, near, subset, far in split:
             if max(x) < 0.0:
                 value = far
                 if near:
-                    reach = _command_reach(backup, [rows[j] for j in near], v, a)
+                    if self.uncertain:
+                        if plan is None:
+                            plan = _command_plan(backup, v, a, slack, offset, None if fixed is None else fixed[1])
+                        reach = _command_rows(backup, plan, subset, v, a)
+                    else:
+                        reach = _command_reach(backup, subset, v, a)
                     value = min(value, min(-(x[j] + r) for j, r in zip(near, reach)))
                 command = max(command, value)
         if command < delta:
             return command - delta
         q1 = [qi + vi * dt + 0.5 * ai * dt * dt for qi, vi, ai in zip(q, v, a)]
         v1 = [vi + ai * dt for vi, ai in zip(v, a)]
-        if backup.hold_deviation is not None:
-            return min(command, self._deviating_state(split, q1, v1, a)) - delta
+        if self.uncertain:
+            return min(command, self._uncertain_state(split, q1, v1, a, fixed)) - delta
         state = -math.inf
-        for rows, near, far in split:
+        for rows, _, near, subset, far in split:
             x1 = [_dot(rows[j][0], q1) + rows[j][1] for j in near]
             if x1 and max(x1) >= 0.0:
                 continue
             value = far
             if near:
-                reach = _state_reach(backup, [rows[j] for j in near], v1)
+                reach = _state_reach(backup, subset, v1)
                 value = min(value, min(-(xj + r) for xj, r in zip(x1, reach)))
             state = max(state, value)
         return min(command, state) - delta
 
-    def _deviating_state(self, split, q1, v1, a) -> float:
-        """The next state's backup margin when the period itself departs from constant acceleration
-        by (x, y) = hold_deviation(‖v‖, ‖a‖, dt): every row value x_j ≤ K_j q1 + T_j + ‖K_j‖x and every
-        velocity within y of v1. A polytope counts only when it contains every such position."""
+    def _next_uncertainty(self, held: list) -> tuple[list, list]:
+        """(how far the next position may be from q1, per block; the next velocity's slack) for block
+        accelerations at most `held` (see `_uncertain_state`)."""
+        backup, dt, eps, eta = self.backup, self.dt, self.eps, self.eta
+        dq, dv = _deviation(backup, [s + e for s, e in zip(self.speeds, eps)],
+                            [h + al for h, al in zip(eta, held)], dt)
+        moved = [e * dt + 0.5 * h * dt * dt + x for e, h, x in zip(eps, eta, dq)]
+        if self.offset is not None:
+            moved = [m + p for m, p in zip(moved, self.offset)]
+        return moved, [e + h * dt + y for e, h, y in zip(eps, eta, dv)]
+
+    def _uncertain_state(self, split, q1, v1, a, fixed) -> float:
+        """The next state's backup margin when the period departs from constant acceleration by
+        (x_b, y_b) = the hold deviation over dt, and the position is known to within p_b (`offset`),
+        the velocity to within ε_b (`slack`), the acceleration to within η_b: every row value
+        x_j ≤ K_j q1 + T_j + Σ_b |K_j,b| (p_b + ε_b dt + ½η_b dt² + x_b) and every velocity within
+        ε_b + η_b dt + y_b of v1. A polytope counts only when it contains every such position. The
+        next sample computes its fallback at its own velocity under state feedback (no spread for
+        it), at its estimate under output feedback."""
         backup = self.backup
-        dq, dv = backup.hold_deviation(_norm(self.v), _norm(a), self.dt)
+        n = len(backup.blocks)
+        if fixed is None:
+            moved, slack1 = self._next_uncertainty(_block_speeds(backup, a))
+            head = None
+        else:
+            _, _, moved, slack1, head = fixed
+        blocks = _parts(backup, v1)
+        plan = None
         state = -math.inf
-        for rows, near, far in split:
-            x1 = [_dot(rows[j][0], q1) + rows[j][1] + _scaled(_norm(rows[j][0]), dq) for j in near]
+        for rows, _, near, subset, far in split:
+            x1 = []
+            for j in near:
+                k, t, parts = rows[j]
+                value = _dot(k, q1) + t
+                for b in range(n):
+                    value += _scaled(parts[b][1], moved[b])
+                x1.append(value)
             if x1 and max(x1) >= 0.0:
                 continue
             value = far
             if near:
-                reach = _state_reach(backup, [rows[j] for j in near], v1, dv)
+                if plan is None:
+                    speeds = [_norm(part) for part in blocks]
+                    if head is None:
+                        head = _state_head(backup, speeds, slack1, None, self.slack is not None)
+                    plan = _planned(backup, head, blocks, speeds)
+                reach = _state_rows(backup, plan, subset, blocks)
                 value = min(value, min(-(xj + r) for xj, r in zip(x1, reach)))
             state = max(state, value)
         return state
@@ -432,35 +758,55 @@ def _crude_rows(bounds: list):
     return crude
 
 
-def _block_bounds(backup: BackupModel, v: list, a: list, dt: float) -> list[float]:
-    """Per block, C_b = (|v_b| + |a_b| T)(T + dt) + s_b(|v_b| + |a_b| T) with T = max(T_w, dt): no
-    row advances more than Σ_b |K_j,b| C_b, neither while a is held T_w then braked, nor over one
-    period plus the stop of the state it leads to (docs/control.md §10). Floats in, floats out.
-
-    With a hold deviation, (x, y) = hold_deviation(‖v‖, ‖a‖, T) and (x_g, y_g) that of the fallback
-    from speed S = ‖v‖ + ‖a‖T + y: C_b = t_b(T + dt) + x + x_g + s_b(t_b + y_g), t_b = |v_b| + |a_b|T + y
-    (‖K_j‖ ≤ Σ_b |K_j,b| since the blocks cover every coordinate, `_rows_of`)."""
-    if backup.hold_deviation is not None:
-        return _deviating_block_bounds(backup, v, a, dt)
+def _block_bounds(backup: BackupModel, v: list, a: list, dt: float, slack: list | None = None,
+                  offset: list | None = None) -> list[float]:
+    """Per block, C_b = t_b(T + dt) + s_b(S_b(t)), t_b = |v_b| + |a_b| T, T = max(T_w, dt), S_b the
+    block's braking speed from the t's: no row advances more than Σ_b |K_j,b| C_b, neither while a is
+    held T_w then braked, nor over one period plus the stop of the state it leads to
+    (docs/control.md §10). Floats in, floats out. With a hold deviation, a slack or an offset,
+    `_uncertain_block_bounds`."""
+    if backup.hold_deviation is not None or slack is not None or offset is not None:
+        return _uncertain_block_bounds(backup, v, a, dt, slack, offset)
     T = max(backup.hold, dt)
-    bounds = []
-    for block in backup.blocks:
-        top = _norm([v[i] for i in block.axes]) + _norm([a[i] for i in block.axes]) * T
-        bounds.append(top * (T + dt) + block.distance(top))
-    return bounds
+    tops = [_norm([v[i] for i in block.axes]) + _norm([a[i] for i in block.axes]) * T for block in backup.blocks]
+    return [top * (T + dt) + block.distance(block.braking_speed(b, tops))
+            for b, (block, top) in enumerate(zip(backup.blocks, tops))]
 
 
-def _deviating_block_bounds(backup: BackupModel, v: list, a: list, dt: float) -> list[float]:
-    """`_block_bounds` for a model with a hold deviation."""
+def _uncertain_block_bounds(backup: BackupModel, v: list, a: list, dt: float, slack: list | None,
+                            offset: list | None) -> list[float]:
+    """`_block_bounds` with a hold deviation and a slack ε_b: with η the acceleration's spread at |v_b|,
+    (x, y) the deviation over T from speeds |v_b| + ε_b and accelerations |a_b| + η_b, the speeds
+    t_b = |v_b| + ε_b + (|a_b| + η_b)T + y_b bound every speed the command's hold and the next state reach;
+    with η̄ the spread at speeds and slacks t (the next state's, at most) and (x_g, y_g) the deviation of
+    the fallback held T_w from speeds t at its deceleration there plus η̄,
+
+        C_b = t_b(T + dt) + x_b + ½η̄_b T² + x_g,b + s_b(S_b(t + η̄T + y_g)),
+
+    which covers both as before (‖K_j‖ ≤ Σ_b |K_j,b| where one deviation moves every coordinate,
+    `_rows_of`); an offset p_b adds p_b to C_b."""
+    return _uncertain_bounds_at(backup, _block_speeds(backup, v), _block_speeds(backup, a), dt, slack, offset)
+
+
+def _uncertain_bounds_at(backup: BackupModel, speeds: list, held: list, dt: float, slack: list | None,
+                         offset: list | None) -> list[float]:
+    """`_uncertain_block_bounds` from block speeds |v_b| and bounds `held` of the block accelerations
+    |a_b| (nondecreasing in them)."""
     T = max(backup.hold, dt)
-    dq, dv = backup.hold_deviation(_norm(v), _norm(a), T)
-    speed = _norm(v) + _norm(a) * T + dv
-    dq_g, dv_g = backup.hold_deviation(speed, _fallback_size(backup, speed), backup.hold)
-    bounds = []
-    for block in backup.blocks:
-        top = _norm([v[i] for i in block.axes]) + _norm([a[i] for i in block.axes]) * T + dv
-        bounds.append(top * (T + dt) + dq + dq_g + _braked_path(block, top + dv_g))
-    return bounds
+    n = len(backup.blocks)
+    eps = slack if slack is not None else [0.0] * n
+    eta = _spread(backup, speeds, slack)
+    accelerations = [h + al for h, al in zip(eta, held)]
+    dq, dv = _deviation(backup, [s + e for s, e in zip(speeds, eps)], accelerations, T)
+    tops = [s + e + al * T + y for s, e, al, y in zip(speeds, eps, accelerations, dv)]
+    eta_top = _spread(backup, tops, None if slack is None else tops)
+    falls = [d + h for d, h in zip(_fallback_decelerations(backup, tops), eta_top)]
+    dq_g, dv_g = _deviation(backup, tops, falls, backup.hold)
+    ends = [t + h * T + y for t, h, y in zip(tops, eta_top, dv_g)]
+    if offset is not None:
+        dq = [x + p for x, p in zip(dq, offset)]
+    return [top * (T + dt) + x + 0.5 * h * T * T + x_g + _braked_path(block, block.braking_speed(b, ends))
+            for b, (block, top, x, h, x_g) in enumerate(zip(backup.blocks, tops, dq, eta_top, dq_g))]
 
 
 def _norm(x: list) -> float:
@@ -497,7 +843,7 @@ def _clearly_safe(backup: BackupModel, feasible, q: list, bounds: list) -> float
 
 
 def speed_aware_rows(backup: BackupModel, feasible, rows: tuple[list, list], v, far: float,
-                     a=None) -> tuple[list, list]:
+                     a=None, slack=None, offset=None) -> tuple[list, list]:
     """Definition 2's rows seen through the stop: inside a polytope, each row value x_j is moved
     towards its face by the state's reach (kept just inside, so that containment is unchanged);
     rates and rows already outside are left as they are. Classifying these makes a state
@@ -505,7 +851,9 @@ def speed_aware_rows(backup: BackupModel, feasible, rows: tuple[list, list], v, 
     detected and the braking distance at the current speed, falls below the bands. With `a`,
     the acceleration of the operator's command, the reach is that of holding it (command_reach):
     the state is hazardous when the operator's own command would not be backup-safe, so the
-    machine holds authority wherever the governor would have to change u_h.
+    machine holds authority wherever the governor would have to change u_h. With `slack` (per
+    block), the reach of every velocity that close to v, and with `offset`, of every position that
+    close to the rows' q (an estimate: output feedback).
 
     A row that stays at or below −`far` even moved by its crude bound Σ_b |K_j,b| C_b
     (`_block_bounds`, dt = 0) is returned unmoved: `far` is the widest band, b2, and Definition 2,
@@ -514,13 +862,15 @@ def speed_aware_rows(backup: BackupModel, feasible, rows: tuple[list, list], v, 
     values, rates = rows
     v_list = v.tolist() if isinstance(v, np.ndarray) else [float(e) for e in v]
     a_list = [0.0] * len(v_list) if a is None else _as_floats(a)
+    slack, offset = _slack(slack, backup), _slack(offset)
     stacked = _stacked_rows(backup, feasible)
-    crude = _crude_rows(_block_bounds(backup, v_list, a_list, 0.0))(stacked)
+    crude = _crude_rows(_block_bounds(backup, v_list, a_list, 0.0, slack, offset))(stacked)
     near = [j for j, (x, c) in enumerate(zip(values, crude)) if x < 0.0 and x + c > -far]
     if not near:
         return rows
     subset = [stacked[j] for j in near]
-    reach = _state_reach(backup, subset, v_list) if a is None else _command_reach(backup, subset, v_list, a_list)
+    reach = (_state_reach(backup, subset, v_list, slack, offset) if a is None
+             else _command_reach(backup, subset, v_list, a_list, slack, offset))
     shifted = list(values)
     for j, r in zip(near, reach):
         shifted[j] = min(values[j] + r, -_INSIDE)
@@ -579,31 +929,35 @@ _LAMBDA_RESOLUTION = 2.0 ** -12   # govern's finest step in λ
 _INSIDE = 1e-9      # m: a shifted row stays this far inside, so the row's polytope still contains q
 
 
-#: Three wheels 120° apart, equal Coulomb brakes: within each 60° sector between two directions
-#: in which one wheel does not turn, the brake force is constant and points against the sector's
-#: bisector, so the velocity turns towards the sector's edge and at most 30° before it slides
-#: along it (docs/control.md §10; tests/test_backup.py measures it on the robot's plant).
-TRANSLATION_DEFLECTION = math.pi / 6
-
-
 #: A real brake holds at rest; the simulated one is c_b tanh(ω/ω_b) (ω_b = 0.2 rad/s), which fades
 #: below a wheel speed of a few ω_b, i.e. below about 1 cm/s: the last stretch of a stop is
-#: slower than a_c allows. 0.5 mm covers it (measured excess over the closed form: ≤ 0.02 mm).
+#: slower than a_c allows. 0.5 mm covers it (tests/test_backup.py measures the plant's stops).
 CREEP = 5e-4
+
+
+#: The output-feedback envelope of the robot, per block (m/s, rad/s): an assumption, not a bound — the
+#: observer's measured errors exceed it, and a translation slack that covers them moves the take-over
+#: ahead of the operator's wish (docs/control.md §10, "Output feedback: the observer's error")
+OBSERVER_ERROR = (0.0, 0.5)
 
 
 def omni_backup(parameters, brake_torque: float, friction_coulomb: float, friction_viscous: float,
                 hold: float, margin: float = 0.01) -> BackupModel:
-    """The omnidirectional robot's stop (docs/safety.md §2): per wheel a Coulomb torque c + c_b and a
-    viscous b. Translation: the least deceleration over directions, (c + c_b)√3/(r m1), and
-    k = 3b/(2r²m1); yaw (every wheel at L_r): 3(c + c_b)L_r/(r m3) and 3bL_r²/(r²m3)."""
-    r, L = parameters.wheel_radius, parameters.wheel_distance
-    m1, m3, _ = (float(x) for x in parameters.theta())
-    c = friction_coulomb + brake_torque
-    translation = BrakeBlock((0, 1), c * math.sqrt(3.0) / (r * m1), 3.0 * friction_viscous / (2.0 * r * r * m1),
-                             TRANSLATION_DEFLECTION, CREEP)
-    yaw = BrakeBlock((2,), 3.0 * c * L / (r * m3), 3.0 * friction_viscous * L * L / (r * r * m3), 0.0, CREEP / L)
-    return BackupModel(hold, (translation, yaw), margin)
+    """The omnidirectional robot's stop (docs/control.md §10, "The robot's stop";
+    models/omni_robot_stop.py): per wheel a Coulomb torque c = friction_coulomb + brake_torque and a
+    viscous b, shared by the translation and the yaw. Translation: a_t = 1.5c/(r m1); yaw:
+    a_ψ = 3cL/(r m3); both k = κ = min(3b/(2r²m1), 3bL²/(r²m3)), braking from their energy speeds
+    S_t² = |v|² + (m3/m1)ψ̇², S_ψ² = ψ̇² + (m1/m3)|v|², in any direction (deflection π). The held
+    wheel torques' force turns with the robot: `OmniHoldDeviation`."""
+    bounds = OmniStopBounds.of(parameters.theta(), parameters.wheel_radius, parameters.wheel_distance,
+                               friction_coulomb + brake_torque, friction_viscous)
+    for_translation, for_yaw = energy_weights(bounds)
+    translation = BrakeBlock((0, 1), bounds.translation_deceleration, bounds.viscous, math.pi, CREEP,
+                             for_translation)
+    yaw = BrakeBlock((2,), bounds.yaw_deceleration, bounds.viscous, math.pi, CREEP / parameters.wheel_distance,
+                     for_yaw)
+    return BackupModel(hold, (translation, yaw), margin, hold_deviation=bounds.hold_deviation(),
+                       observer_error=OBSERVER_ERROR)
 
 
 def arm_backup(parameters, brake_torque, hold: float, margin: float = 0.01) -> BackupModel:

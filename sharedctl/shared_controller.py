@@ -17,7 +17,7 @@ from functools import cached_property
 
 import numpy as np
 
-from .backup import BackupModel, govern, speed_aware_rows
+from .backup import BackupModel, govern, speed_aware_rows, uncertain_prediction
 from .constraints import FeasibleSet
 from .models import EulerLagrangeModel
 from .reference import ReferenceShape
@@ -132,8 +132,11 @@ class SharedController:
         backup = self.backup
         class_rows = rows
         if backup is not None:
-            held = model.acceleration(q, v_used, operator.force) if mode is not Mode.MACHINE else None
-            class_rows = speed_aware_rows(backup, feasible, rows, v_used, self.sharing.bands.b2, held)
+            judged = judged_state(backup, model, observer, q, v_used, state.sent[-lag:] if lag else (), dt)
+            q_b, v_b, slack, offset = judged
+            rows_b = rows if q_b is q else feasible.row_values(floats(q_b), v_b.tolist())
+            held = model.acceleration(q_b, v_b, operator.force) if mode is not Mode.MACHINE else None
+            class_rows = speed_aware_rows(backup, feasible, rows_b, v_b, self.sharing.bands.b2, held, slack, offset)
         every_group = _EveryGroupOnDemand(feasible, np.array(q_list), np.array(v_list), operator.desired,
                                           self.reference, machine.tracking.lam)
         arbiter, decision = arbitrate(feasible, self.sharing, state.arbiter, q, v_used, intent, dt,
@@ -180,7 +183,8 @@ class SharedController:
         u_s = shared_input(decision, u_h, u_f)
         backup_share = 0.0
         if backup is not None and decision.authority is not Authority.HUMAN:
-            governed = govern(backup, model, feasible, q, v_used, u_s, dt)
+            q_b, v_b, slack, offset = judged
+            governed = govern(backup, model, feasible, q_b, v_b, u_s, dt, slack, offset)
             u_s, backup_share = governed.u, governed.share
             if backup_share > 0.0:
                 theta_next = theta_hat      # the law's update assumes u_f acts; it did not
@@ -217,6 +221,18 @@ class SharedController:
 
 #: commands kept for the predictor: 64 periods (128 ms at 500 Hz) — more than any delay inside the envelope
 HISTORY = 64
+
+
+def judged_state(backup: BackupModel, model, observer, q, v, commands, dt: float):
+    """The state the backup-safe checks judge, (q, v, slack, offset): with state feedback (q, v) itself
+    (`step` has predicted it already); under output feedback with `backup.observer_error`, every state
+    within the observer's error of (q, v̂), predicted over the delay by the commands sent meanwhile
+    (backup.uncertain_prediction; docs/control.md §10)."""
+    if observer is None or not backup.observer_error:
+        return q, v, None, None
+    if not commands:
+        return q, v, backup.observer_error, None
+    return uncertain_prediction(backup, model, q, v, backup.observer_error, commands, dt)
 
 
 def predict(model, q, v, commands, dt: float):

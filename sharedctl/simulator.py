@@ -213,14 +213,17 @@ def simulate(loop: ClosedLoop, q0, v0, duration: float, dt: float) -> Trace:
     zero_n, zero_theta = np.zeros(n), np.zeros(n_theta)
     no_law_rate = {}
     backup = loop.backup
+    # under output feedback the backup-safe checks judge every velocity within the observer's error of v̂
+    observed = backup.observer_error if backup is not None and observer and backup.observer_error else None
 
-    def class_rows(q_, v_, u_h):
+    def class_rows(q_, v_, u_h, slack=None):
         """Definition 2's rows, seen through the fail-safe stop with the operator's command held,
-        when the loop has a backup model."""
+        when the loop has a backup model; `slack`: v_ is the observer's v̂, known to within it."""
         if backup is None:
             return None
         held = model.acceleration(q_, v_, u_h) if loop.sharing.mode is not Mode.MACHINE else None
-        return speed_aware_rows(backup, feasible, feasible.row_values(q_, v_), v_, loop.sharing.bands.b2, held)
+        return speed_aware_rows(backup, feasible, feasible.row_values(q_, v_), v_, loop.sharing.bands.b2, held,
+                                slack)
 
     def rates(t, q_, v_, th_, s_, o_, decision, want_signals=False):
         desired = human.desired(t)
@@ -245,7 +248,7 @@ def simulate(loop: ClosedLoop, q0, v0, duration: float, dt: float) -> Trace:
                 th_dot = out.theta_dot
         u_s = shared_input(decision, u_h, u_f)
         if backup is not None and decision.authority is not Authority.HUMAN:
-            governed = govern(backup, model, feasible, q_, v_meas, u_s, dt)
+            governed = govern(backup, model, feasible, q_, v_meas, u_s, dt, observed)
             if governed.share > 0.0:
                 u_s, th_dot = governed.u, zero_theta       # the law's update assumes u_f acts; it did not
         if engaged:
@@ -267,7 +270,7 @@ def simulate(loop: ClosedLoop, q0, v0, duration: float, dt: float) -> Trace:
         q_r_all, values = all_groups(feasible.stack, q, v_meas, desired, loop.reference, ctrl.tracking.lam)
         ref_ok = feasible.reference_inside(q_r_all)
         wish_inside = wish_admissible(feasible, desired.q, loop.reference.epsilon)
-        seen = class_rows(q, v_meas, command.force)
+        seen = class_rows(q, v_meas, command.force, observed)
         push_away = wish_inside and push_turned_away(feasible, q, desired.q, command.force, loop.reference.epsilon,
                                                      loop.sharing.bands, None if seen is None else seen[0])
         arbiter, decision = arbitrate(feasible, loop.sharing, arbiter, q, v_meas, intent, dt,

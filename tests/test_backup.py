@@ -1,9 +1,12 @@
 """Backup-safe states (sharedctl/backup.py, docs/control.md §10) against independent oracles.
 
 * the braking distance's closed form against a numerical integral;
-* the omnidirectional robot's brake blocks against the plant's own friction and brakes: the least
-  deceleration over directions (stopping.worst_coast_model samples them), and the displacement of
-  a braked stop measured on the plant (RK4, services/robot/plant.py) within the cone bound;
+* the omnidirectional robot's brake blocks against the plant's own wheels: the brakes' least power
+  over translations and turns (the plant's wheel map, sampled), and the displacement and the turn of
+  braked stops — translating, turning, both — measured on the plant (RK4, services/robot/plant.py)
+  within the energy bound, for rows in the plane and rows on the yaw;
+* the held wheel torques' departure from constant acceleration against RK4 of the plant without
+  friction (the force turns with the robot);
 * the fallback never lowers the state's backup margin (the invariance argument), and govern's
   result is backup-safe whenever it says so;
 * in closed loop on the plant: a loss of actuation at any instant of the adversarial wall and of
@@ -44,11 +47,33 @@ def test_the_braking_distance_is_the_integral_of_v_over_the_deceleration(speed):
     assert creeping.distance(speed) == pytest.approx(block.distance(speed) + (5e-4 if speed > 0 else 0.0), rel=1e-12)
 
 
-def test_the_translation_block_has_the_plant_s_least_deceleration_over_directions():
-    worst = stopping.worst_coast_model(Plant(MODEL, CONFIG))
-    translation = BACKUP.blocks[0]
-    assert translation.coulomb == pytest.approx(worst.coulomb, rel=1e-4)
-    assert translation.viscous == pytest.approx(worst.viscous, rel=1e-9)
+def _least_brake_power(angle_count=720, turn_count=2001):
+    """The plant's least brake power c Σ_j |ω_j| (c = friction + brake per wheel; ω from the plant's own
+    wheel map) over unit translations with any yaw rate, and over unit yaw rates with any translation,
+    on a grid of headings and rates (W per unit speed)."""
+    plant, c = Plant(MODEL, CONFIG), CONFIG.friction_coulomb + CONFIG.brake_torque
+    L = MODEL.parameters.wheel_distance
+
+    def power(v):
+        return c * sum(abs(w) for w in plant.wheel_speeds(plant.initial_state(np.zeros(3), v)))
+
+    headings = np.linspace(0.0, 2.0 * math.pi, angle_count, endpoint=False)
+    turns = np.linspace(-2.0 / L, 2.0 / L, turn_count)
+    translation = min(power([math.cos(h), math.sin(h), w]) for h in headings for w in turns)
+    yaw = min(power([x, 0.0, 1.0]) for x in np.linspace(-2.0, 2.0, turn_count))
+    return translation, yaw
+
+
+def test_the_blocks_decelerate_at_the_plant_s_least_brake_power_over_translations_and_turns():
+    """K̇ ≤ −(brake power): the least power per unit translation speed, over every heading and yaw
+    rate, is 1.5c/r (not the √3c/r of a robot that does not turn), and per unit yaw rate 3cL/r; the
+    blocks' a_c are those over m1 and m3."""
+    m1, m3, _ = MODEL.theta
+    translation, yaw = _least_brake_power()
+    assert BACKUP.blocks[0].coulomb == pytest.approx(translation / m1, rel=2e-3)
+    assert BACKUP.blocks[1].coulomb == pytest.approx(yaw / m3, rel=2e-3)
+    not_turning = stopping.worst_coast_model(Plant(MODEL, CONFIG))
+    assert BACKUP.blocks[0].coulomb < 0.9 * not_turning.coulomb
 
 
 def _braked_path(v0, psi=0.0, psi_dot=0.0, dt=5e-4):
@@ -57,7 +82,7 @@ def _braked_path(v0, psi=0.0, psi_dot=0.0, dt=5e-4):
     state = plant.initial_state(np.array([0.0, 0.0, psi]), np.array([v0[0], v0[1], psi_dot]))
     brakes = plant.brake_torques((True, True, True))
     path = [state.q.copy()]
-    for _ in range(20_000):
+    for _ in range(40_000):
         state = plant.step(state, (0.0, 0.0, 0.0), dt, brakes)
         path.append(state.q.copy())
         if np.linalg.norm(state.qd) < 1e-4:
@@ -65,24 +90,44 @@ def _braked_path(v0, psi=0.0, psi_dot=0.0, dt=5e-4):
     return np.array(path)
 
 
-@settings(max_examples=40, deadline=None, derandomize=True)
-@given(speed=st.floats(0.05, 3.0), heading=st.floats(-math.pi, math.pi), normal=st.floats(-math.pi, math.pi),
-       psi=st.floats(-0.5, 0.5))
-def test_a_braked_stop_advances_a_row_no_further_than_the_cone_bound(speed, heading, normal, psi):
-    """On the plant: from any speed and heading, at any yaw, the largest advance along any row
-    direction n while the brakes stop the robot is at most advance_b(n, v) (s_b(|v|) times the
-    best cosine within 30° of v) — the bound the governor and the speed-aware sets rely on."""
-    v0 = speed * np.array([math.cos(heading), math.sin(heading)])
-    path = _braked_path(v0, psi)
-    n = np.array([math.cos(normal), math.sin(normal)])
-    measured = float(np.max(path[:, :2] @ n))
-    bound = BACKUP.blocks[0].advance([(tuple(n), 1.0)], list(v0))[0]
-    assert measured <= bound + 1e-6
+#: the stop at once (T_w = 0): its state reach is the braked path alone
+BRAKES = omni_backup(MODEL.parameters, CONFIG.brake_torque, CONFIG.friction_coulomb, CONFIG.friction_viscous, 0.0)
 
 
-def test_a_braked_stop_turns_the_velocity_so_the_cone_is_needed():
-    """Not vacuous: heading 15° off a wheel's null direction, the stop drifts sideways — a row
-    along the normal to v advances, which a straight-line stop would not allow."""
+@settings(max_examples=60, deadline=None, derandomize=True)
+@given(speed=st.floats(0.0, 3.0), heading=st.floats(-math.pi, math.pi), yaw_rate=st.floats(-4.0, 4.0),
+       normal=st.floats(-math.pi, math.pi), psi=st.floats(-0.5, 0.5))
+def test_a_braked_stop_advances_a_row_no_further_than_the_energy_bound(speed, heading, yaw_rate, normal, psi):
+    """On the plant: from any translation and any yaw rate, at any yaw, the largest advance along any
+    direction n in the plane, and the largest turn either way, while the brakes stop the robot are at
+    most the model's reach of those rows (s_t(S_t) and s_ψ(S_ψ) from the energy speeds) — the bound
+    the governor and the speed-aware sets rely on."""
+    v = np.array([speed * math.cos(heading), speed * math.sin(heading), yaw_rate])
+    if not np.any(v):
+        return
+    path = _braked_path(v[:2], psi, yaw_rate)
+    n = np.array([math.cos(normal), math.sin(normal), 0.0])
+    rows = np.array([n, [0.0, 0.0, 1.0], [0.0, 0.0, -1.0]])
+    measured = [float(np.max((path - path[0]) @ row)) for row in rows]
+    bound = BRAKES.state_reach(rows, v)
+    assert all(m <= b + 1e-6 for m, b in zip(measured, bound)), (measured, bound)
+
+
+def test_a_turning_stop_needs_the_energy_of_both_blocks():
+    """Not vacuous: at 0.5 m/s turning at 1 rad/s the robot brakes farther than its translation speed
+    alone allows (the brakes also stop the turn), and from a straight 1 m/s with no yaw rate (at a yaw
+    of 1.4 rad, off the wheels' symmetry) it turns more than 0.1 rad (the brakes spin it up): each
+    block's path needs the other's speed."""
+    turning = _braked_path(np.array([0.5, 0.0]), psi_dot=1.0)
+    alone = BRAKES.blocks[0].distance(0.5)
+    assert float(np.max(turning[:, 0])) > 1.1 * alone
+    straight = _braked_path(np.array([0.0, 1.0]), psi=1.4)
+    assert float(np.max(np.abs(straight[:, 2] - 1.4))) > 0.1
+
+
+def test_a_braked_stop_turns_the_velocity_so_no_direction_can_be_left_out():
+    """Heading 15° off a wheel's null direction, the stop drifts sideways: a row along the normal
+    to v advances, which a straight-line stop would not allow (the bound takes every direction)."""
     v0 = 1.0 * np.array([math.cos(math.radians(15.0)), math.sin(math.radians(15.0))])
     path = _braked_path(v0)
     sideways = np.array([-v0[1], v0[0]])
@@ -90,13 +135,59 @@ def test_a_braked_stop_turns_the_velocity_so_the_cone_is_needed():
     assert drift > 1e-3
 
 
+def _held_torque_deviation(q0, v0, tau, hold, steps=400):
+    """RK4 of the plant without friction or brakes under the wheel torques τ held `hold` s: the
+    largest |q_xy(t) − q0 − v0t − ½a0t²| and |q̇_xy(t) − v0 − a0t| and the same for the yaw, a0 the
+    model's acceleration at the start. The wheels must stay below the drives' speed limit (beyond it
+    the plant's drives give no torque): asserted."""
+    plant = Plant(MODEL, RobotSimConfig(friction_viscous=0.0, friction_coulomb=0.0))
+    a0 = MODEL.acceleration(q0, v0, np.array(MODEL.wheel_map.generalised_force(q0.tolist(), tau)))
+    state, h = plant.initial_state(q0, v0), hold / steps
+    worst = np.zeros(4)
+    for k in range(1, steps + 1):
+        state = plant.step(state, tau, h)
+        t = k * h
+        dq, dv = state.q - (q0 + v0 * t + 0.5 * a0 * t * t), state.qd - (v0 + a0 * t)
+        worst = np.maximum(worst, [np.hypot(*dq[:2]), np.hypot(*dv[:2]), abs(dq[2]), abs(dv[2])])
+        assert max(abs(w) for w in plant.wheel_speeds(state)) < CONFIG.wheel_speed_limit
+    return worst, a0
+
+
 @settings(max_examples=60, deadline=None, derandomize=True)
-@given(x=st.floats(-0.8, 0.8), y=st.floats(-0.8, 0.8), speed=st.floats(0.0, 2.0), heading=st.floats(-math.pi, math.pi),
-       yaw_rate=st.floats(-1.0, 1.0))
-def test_the_fallback_never_lowers_the_state_s_backup_margin(x, y, speed, heading, yaw_rate):
+@given(psi=st.floats(-math.pi, math.pi), speed=st.floats(0.0, 1.2), heading=st.floats(-math.pi, math.pi),
+       yaw_rate=st.floats(-3.0, 3.0), tau=st.tuples(*[st.floats(-4.0, 4.0)] * 3), hold=st.sampled_from((0.02, 0.1)))
+def test_held_wheel_torques_depart_from_constant_acceleration_no_more_than_the_hold_deviation(
+        psi, speed, heading, yaw_rate, tau, hold):
+    """The drives hold wheel torques: the world-frame force turns with the robot. On the plant (no
+    friction, so the model's dynamics), the motion departs from q0 + v0t + ½a0t² by at most the hold
+    deviation's (x_t, y_t), and the yaw not at all."""
+    q0 = np.array([0.0, 0.0, psi])
+    v0 = np.array([speed * math.cos(heading), speed * math.sin(heading), yaw_rate])
+    worst, a0 = _held_torque_deviation(q0, v0, tau, hold)
+    (x, x_yaw), (y, y_yaw) = BACKUP.hold_deviation.by_block([speed, abs(yaw_rate)],
+                                                            [math.hypot(*a0[:2]), abs(a0[2])], hold)
+    assert worst[0] <= x + 1e-9 and worst[1] <= y + 1e-9, (worst, x, y)
+    assert worst[2] <= 1e-9 and worst[3] <= 1e-9 and x_yaw == 0.0 and y_yaw == 0.0
+
+
+def test_a_turning_hold_departs_from_constant_acceleration():
+    """Not vacuous: 100 ms of 4 N·m on one wheel while turning at 2 rad/s moves the robot millimetres
+    off the constant-acceleration line, and the bound is within a factor 3 of it."""
+    q0, v0 = np.zeros(3), np.array([1.0, 0.0, 2.0])
+    worst, a0 = _held_torque_deviation(q0, v0, (4.0, 0.0, 0.0), 0.1)
+    (x, _), (y, _) = BACKUP.hold_deviation.by_block([1.0, 2.0], [math.hypot(*a0[:2]), abs(a0[2])], 0.1)
+    assert worst[0] > 2e-3
+    assert worst[0] <= x < 3.0 * worst[0]
+
+
+@settings(max_examples=60, deadline=None, derandomize=True)
+@given(x=st.floats(-0.8, 0.8), y=st.floats(-0.8, 0.8), psi=st.floats(-1.0, 1.0), speed=st.floats(0.0, 2.0),
+       heading=st.floats(-math.pi, math.pi), yaw_rate=st.floats(-2.0, 2.0))
+def test_the_fallback_never_lowers_the_state_s_backup_margin(x, y, psi, speed, heading, yaw_rate):
     """Under u_g (held one period, the model integrated finely) the state's backup margin does not
-    decrease: the step of the invariance argument in docs/control.md §10."""
-    q = np.array([x, y, 0.0])
+    decrease: the step of the invariance argument in docs/control.md §10, for the planar rows and
+    the yaw rows of the box, turning or not."""
+    q = np.array([x, y, psi])
     v = np.array([speed * math.cos(heading), speed * math.sin(heading), yaw_rate])
     before = BACKUP.state_margin(BOX, q, v)
     u_g = MODEL.inverse_dynamics(q, v, BACKUP.fallback_acceleration(v))
@@ -169,6 +260,118 @@ def test_govern_sends_the_fallback_outside_the_envelope_when_the_law_does_not_br
     assert not out.feasible and out.share == 1.0
     np.testing.assert_allclose(out.u, u_g, rtol=1e-12)
     assert out.u[0] < 0.0
+
+
+@settings(max_examples=80, deadline=None, derandomize=True)
+@given(speed=st.floats(0.0, 3.0), heading=st.floats(-math.pi, math.pi), yaw_rate=st.floats(-3.0, 3.0),
+       accel=st.floats(0.0, 60.0), turn=st.floats(-math.pi, math.pi), yaw_accel=st.floats(-80.0, 80.0),
+       observed=st.booleans())
+def test_the_crude_row_bound_covers_the_command_s_and_the_next_state_s_reach(speed, heading, yaw_rate, accel, turn,
+                                                                              yaw_accel, observed):
+    """Σ_b |K_j,b| C_b (`_block_bounds`) is at least each row's exact command reach, and at least its
+    advance over one period plus the next state's reach (with the period's own deviation, and under
+    output feedback the slack): so the rows it sets aside cannot change the governor's decision."""
+    from sharedctl.backup import _block_bounds, _crude_rows, _deviation, _rows_of, _spread, _state_reach
+    dt, K = 0.002, np.array([[1.0, 0.0, 0.0], [-0.6, 0.8, 0.0], [0.0, 0.0, 1.0], [0.0, 0.0, -1.0]])
+    rows = _rows_of(BACKUP, K)
+    v = [speed * math.cos(heading), speed * math.sin(heading), yaw_rate]
+    a = [accel * math.cos(turn), accel * math.sin(turn), yaw_accel]
+    slack = list(BACKUP.observer_error) if observed else None
+    crude = _crude_rows(_block_bounds(BACKUP, v, a, dt, slack))(rows)
+    command = BACKUP.command_reach(K, v, a, slack)
+    speeds = [math.hypot(v[0], v[1]), abs(v[2])]
+    eps = slack or [0.0, 0.0]
+    eta = _spread(BACKUP, speeds, slack)
+    dq, dv = _deviation(BACKUP, [s + e for s, e in zip(speeds, eps)],
+                        [math.hypot(a[0], a[1]) + eta[0], abs(a[2]) + eta[1]], dt)
+    moved = [e * dt + 0.5 * h * dt * dt + x for e, h, x in zip(eps, eta, dq)]
+    v1 = [vi + ai * dt for vi, ai in zip(v, a)]
+    state = _state_reach(BACKUP, rows, v1, [e + h * dt + y for e, h, y in zip(eps, eta, dv)], None, observed)
+    for j, (k, _, parts) in enumerate(rows):
+        period = sum(ki * (vi * dt + 0.5 * ai * dt * dt) for ki, vi, ai in zip(k, v, a)) \
+            + parts[0][1] * moved[0] + parts[1][1] * moved[1]
+        assert command[j] <= crude[j] + 1e-12
+        assert period + state[j] <= crude[j] + 1e-12
+
+
+def _held_then_braked(q, v, u, hold=CONFIG.watchdog_timeout, dt=1e-3):
+    """On the plant: the wheel torques of u at q held `hold` s, then the brakes to rest; the least
+    margin of BOX's rows (|x|, |y| ≤ 1, |ψ| ≤ 1.5) on the way."""
+    plant = Plant(MODEL, CONFIG)
+    state = plant.initial_state(q, v)
+    tau = MODEL.wheel_map.wheel_torques(q.tolist(), u.tolist())
+    brakes = plant.brake_torques((True, True, True))
+    smallest = BOX.margin(state.q)
+    for k in range(40_000):
+        held = k * dt < hold
+        state = plant.step(state, tau if held else (0.0, 0.0, 0.0), dt, (0.0, 0.0, 0.0) if held else brakes)
+        smallest = min(smallest, BOX.margin(state.q))
+        if not held and np.linalg.norm(state.qd) < 1e-4:
+            break
+    return smallest
+
+
+def _corners(v_hat, slack):
+    """Velocities at the slack's edge around v̂: ±ε_t along and across the translation, ±ε_ψ on the yaw."""
+    e_t, e_psi = slack
+    return [v_hat + np.array([dx * e_t, dy * e_t, dpsi * e_psi])
+            for dx, dy in ((1, 0), (-1, 0), (0, 1), (0, -1)) for dpsi in (1, -1)]
+
+
+@settings(max_examples=20, deadline=None, derandomize=True)
+@given(x=st.floats(0.3, 0.8), speed=st.floats(0.5, 1.8), heading=st.floats(-0.6, 0.6), yaw_rate=st.floats(-1.0, 1.0),
+       push=st.floats(100.0, 400.0))
+def test_govern_with_the_observer_s_error_sends_a_command_whose_stop_ends_inside_from_every_velocity_within_it(
+        x, speed, heading, yaw_rate, push):
+    """Output feedback: the governor given v̂ and the slack ε sends a command that, held T_w on the
+    plant from any velocity at the slack's edge and braked, stays inside the box."""
+    q = np.array([x, 0.0, 0.0])
+    v_hat = np.array([speed * math.cos(heading), speed * math.sin(heading), yaw_rate])
+    slack = BACKUP.observer_error
+    out = govern(BACKUP, MODEL, BOX, q, v_hat, np.array([push, 0.0, 0.0]), 0.002, slack)
+    if not out.feasible:
+        return
+    assert all(_held_then_braked(q, v, out.u) > 0.0 for v in _corners(v_hat, slack))
+
+
+def test_without_the_slack_the_observer_s_error_carries_the_stop_outside():
+    """Not vacuous: turning at v̂ = 1 rad/s at ψ = 1.1 towards the yaw face 1.5, the truth 1.5 rad/s (within
+    ε_ψ), a 20 N·m push on the yaw: the command governed on v̂ alone turns the robot past the face from
+    the truth, the one governed with the slack stops inside."""
+    q, v_hat = np.array([0.0, 0.0, 1.1]), np.array([0.0, 0.0, 1.0])
+    v = v_hat + np.array([0.0, 0.0, BACKUP.observer_error[1]])
+    u = np.array([0.0, 0.0, 20.0])
+    trusting = govern(BACKUP, MODEL, BOX, q, v_hat, u, 0.002)
+    doubting = govern(BACKUP, MODEL, BOX, q, v_hat, u, 0.002, BACKUP.observer_error)
+    assert trusting.feasible and doubting.feasible and doubting.share > trusting.share
+    assert _held_then_braked(q, v, trusting.u) < 0.0 < _held_then_braked(q, v, doubting.u)
+
+
+@settings(max_examples=30, deadline=None, derandomize=True)
+@given(psi=st.floats(-math.pi, math.pi), speed=st.floats(0.0, 1.2), heading=st.floats(-math.pi, math.pi),
+       yaw_rate=st.floats(-2.0, 2.0), corner=st.integers(0, 7), lag=st.integers(1, 25),
+       force=st.tuples(st.floats(-150.0, 150.0), st.floats(-150.0, 150.0), st.floats(-10.0, 10.0)))
+def test_the_uncertain_prediction_holds_every_state_the_slack_leaves_possible(psi, speed, heading, yaw_rate, corner,
+                                                                              lag, force):
+    """From (q, v̂) with the slack ε, over `lag` periods of one command (converted to wheel torques at each
+    period's start and held, as the drives hold it; the plant without friction, so the model's dynamics):
+    the plant started at a velocity on the slack's edge ends within the predicted slack and offset of
+    the predicted state, block by block."""
+    from sharedctl.backup import uncertain_prediction
+    q0 = np.array([0.0, 0.0, psi])
+    v_hat = np.array([speed * math.cos(heading), speed * math.sin(heading), yaw_rate])
+    u = np.array(force)
+    dt = 0.002
+    q_p, v_p, slack, offset = uncertain_prediction(BACKUP, MODEL, q0, v_hat, BACKUP.observer_error, [u] * lag, dt)
+    plant = Plant(MODEL, RobotSimConfig(friction_viscous=0.0, friction_coulomb=0.0))
+    state = plant.initial_state(q0, _corners(v_hat, BACKUP.observer_error)[corner])
+    for _ in range(lag):
+        tau = MODEL.wheel_map.wheel_torques(state.q.tolist(), u.tolist())
+        for _ in range(4):
+            state = plant.step(state, tau, dt / 4)
+    dq, dv = state.q - q_p, state.qd - v_p
+    assert np.hypot(*dq[:2]) <= offset[0] + 1e-9 and abs(dq[2]) <= offset[1] + 1e-9, (dq, offset)
+    assert np.hypot(*dv[:2]) <= slack[0] + 1e-9 and abs(dv[2]) <= slack[1] + 1e-9, (dv, slack)
 
 
 @pytest.mark.parametrize("controller", S.CONTROLLERS)

@@ -3,7 +3,9 @@
 The oracle is the scalar module, one state at a time, on seeded random states of the packaged
 scenarios' feasible sets (convex, and the non-convex union of two polytopes): states inside and
 outside Q_a, blocks at rest, speeds on both branches of the braking distance, commands that are
-already backup-safe, that need the search for λ and that not even the fallback can save. Values
+already backup-safe, that need the search for λ and that not even the fallback can save; for the
+robot's model (a hold deviation per block, shared brakes) also with a slack on the velocity (output
+feedback: each robot its own). Values
 agree to rounding (REACH_TOL, FORCE_TOL, and λ: the regula falsi's chords are built from margins
 that may differ in the last bit); decisions — which robots the governor moves, which rows move —
 are identical.
@@ -147,6 +149,72 @@ def test_speed_aware_rows_equal_the_scalar_rows(name, which, held):
         np.testing.assert_allclose(got[:, i], expected[0], rtol=0, atol=REACH_TOL, err_msg=f"robot {i}")
         np.testing.assert_array_equal(got[:, i] < 0.0, np.array(rows[0]) < 0.0)
     assert 0 < moved_robots < q.shape[0], "the sample must hold robots whose rows move and robots whose rows do not"
+
+
+OMNI = [("paper_convex", "omni"), ("paper_nonconvex", "omni")]
+
+
+def _slacks(rng, N):
+    """Per robot a slack per block (translation m/s, yaw rad/s), some zero."""
+    return rng.choice([0.0, 0.05, 0.15, 0.4], size=(2, N)) * np.array([[1.0], [3.0]])
+
+
+@pytest.mark.parametrize("name,which", OMNI)
+def test_reaches_and_margins_with_a_slack_equal_the_scalar_ones(name, which):
+    loop, backup, batch, stacked = _case(name, which)
+    rng = np.random.default_rng(16)
+    q, v, a = _states(rng, 300)
+    slack = _slacks(rng, 300)
+    state = batch.state_reach(v.T, list(slack))[stacked]
+    command = batch.command_reach(v.T, a.T, list(slack))[stacked]
+    state_margin = batch.state_margin(q.T, v.T, list(slack))
+    command_margin = batch.command_margin(q.T, v.T, a.T, list(slack))
+    K = loop.feasible.row_matrix
+    for i in range(v.shape[0]):
+        np.testing.assert_allclose(state[:, i], backup.state_reach(K, v[i], slack[:, i]), rtol=0, atol=REACH_TOL)
+        np.testing.assert_allclose(command[:, i], backup.command_reach(K, v[i], a[i], slack[:, i]), rtol=0,
+                                   atol=REACH_TOL)
+        assert state_margin[i] == pytest.approx(backup.state_margin(loop.feasible, q[i], v[i], slack[:, i]),
+                                                abs=REACH_TOL)
+        assert command_margin[i] == pytest.approx(
+            backup.command_margin(loop.feasible, q[i], v[i], a[i], slack[:, i]), abs=REACH_TOL)
+
+
+@pytest.mark.parametrize("name,which", OMNI)
+def test_the_governor_with_a_slack_equals_the_scalar_governor_robot_by_robot(name, which):
+    loop, backup, batch, _ = _case(name, which)
+    rng = np.random.default_rng(17)
+    N = 400
+    q, v, _ = _states(rng, N)
+    slack = _slacks(rng, N)
+    u = rng.uniform(-60.0, 60.0, (N, 3))
+    model = OmniRobot()
+    theta = np.repeat(model.theta[:, None], N, axis=1)
+    sent, share = batch.govern(theta, q.T, v.T, u.T, DT, list(slack))
+    expected = [govern(backup, model, loop.feasible, q[i], v[i], u[i], DT, slack[:, i]) for i in range(N)]
+    shares = np.array([g.share for g in expected])
+    np.testing.assert_array_equal(share == 0.0, shares == 0.0)
+    np.testing.assert_allclose(share, shares, rtol=1e-12, atol=0)
+    np.testing.assert_allclose(sent, np.stack([g.u for g in expected], axis=1), rtol=0, atol=FORCE_TOL)
+    moved = sum(g.share > 0.0 and g.feasible for g in expected)
+    hopeless = sum(not g.feasible for g in expected)
+    assert min(moved, hopeless) >= 5, (moved, hopeless)
+
+
+@pytest.mark.parametrize("held", [False, True], ids=["state", "operator_command_held"])
+@pytest.mark.parametrize("name,which", OMNI)
+def test_speed_aware_rows_with_a_slack_equal_the_scalar_rows(name, which, held):
+    loop, backup, batch, stacked = _case(name, which)
+    rng = np.random.default_rng(18)
+    q, v, a = _states(rng, 400)
+    slack = _slacks(rng, 400)
+    feasible, far = loop.feasible, loop.sharing.bands.b2
+    x = (batch.row_K @ q.T) + batch.row_T
+    got = batch.speed_aware_rows(x, v.T, far, a.T if held else None, list(slack))[stacked]
+    for i in range(q.shape[0]):
+        rows = feasible.row_values(q[i], v[i])
+        expected = speed_aware_rows(backup, feasible, rows, v[i], far, a[i] if held else None, slack[:, i])
+        np.testing.assert_allclose(got[:, i], expected[0], rtol=0, atol=REACH_TOL, err_msg=f"robot {i}")
 
 
 def test_a_batch_refuses_robots_with_different_backup_models():

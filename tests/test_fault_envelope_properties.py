@@ -305,9 +305,7 @@ def test_delay_and_loss_within_the_envelope_never_leave_a_random_union_of_polyto
 
 # ----- 3: a kill at a random instant ------------------------------------------------------------
 @pytest.mark.slow
-@pytest.mark.parametrize("law", [pytest.param("ce", marks=pytest.mark.xfail(strict=True, reason=SHARED_BRAKES)),
-                                 pytest.param("nce", marks=pytest.mark.xfail(strict=True, reason=SHARED_BRAKES)),
-                                 pytest.param("of", marks=pytest.mark.xfail(strict=True, reason=OBSERVER_ERROR))])
+@pytest.mark.parametrize("law", ["ce", "nce", "of"])
 def test_a_kill_at_a_random_instant_of_the_approach_stops_inside_a_random_union_of_polytopes(law):
     """Random unions, a random operator, delay and loss: the controller killed every 20 ms of the
     approach from a random instant (the drives hold their last torque T_w, then the brakes): every
@@ -379,7 +377,6 @@ def braked_stop_margin(q, v) -> float:
     return smallest
 
 
-@pytest.mark.xfail(strict=True, reason=SHARED_BRAKES)
 @pytest.mark.parametrize("q, v", [
     ((0.94, 0.0, 0.0), (0.5, 0.0, 1.0)),     # turning: the translation brakes slower (4.4 mm past x = 1)
     ((0.0, 0.0, 1.4), (0.0, 1.0, 0.0)),      # translating: the robot turns 0.16 rad, past ψ = 1.5
@@ -398,7 +395,6 @@ def killed_at(case, law, operator, envelope, instant) -> FaultLoop:
     return start(case, law, operator, envelope).run(periods(instant)).run_to_rest()
 
 
-@pytest.mark.xfail(strict=True, reason=SHARED_BRAKES)
 @pytest.mark.parametrize("law", ["ce", "nce"])
 def test_a_kill_while_the_operator_turns_the_robot_stops_inside(law):
     """The kill test's example, shrunk: no delay, no loss, random deflections (the operator has
@@ -408,7 +404,6 @@ def test_a_kill_while_the_operator_turns_the_robot_stops_inside(law):
     assert killed.min_margin > 0.0, killed.report(", killed at t=2.998 s")
 
 
-@pytest.mark.xfail(strict=True, reason=OBSERVER_ERROR)
 def test_a_kill_during_an_output_feedback_approach_stops_inside():
     """The kill test's example for OF, shrunk: a 2 ms command transit, no loss, a rush at 1.37 m/s;
     v̂ = −1.23 m/s against q̇ = −1.36 m/s, the governed command's margin on q̇ is −72 mm, and the

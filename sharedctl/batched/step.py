@@ -70,7 +70,7 @@ class StepKernel:
             u_h0, intent = ops.command(wish, q, v)
         row_ref, ref_ok, wish_ok = self.reference(wish)
         groups = all_groups(table, q, v_meas, row_ref, e.lam)
-        seen = self.seen_rows(fleet, groups.rows.x, v_meas, u_h0)
+        seen = self.seen_rows(fleet, groups.rows.x, v_meas, u_h0, self.observed())
         situation = classify(table, groups.rows, e.sharing.bands, seen)
         missed = missed_rows(table, situation)
         chosen = select_group(table, situation, groups.value, missed, ref_ok)
@@ -292,15 +292,23 @@ class StepKernel:
         seen = self.seen_rows(fleet, rows.x, v, u_h0)
         return classify(self.e.table, true_rows, self.e.sharing.bands, seen).overall
 
-    def seen_rows(self, fleet, x, v, u_h):
+    def seen_rows(self, fleet, x, v, u_h, slack=None):
         """The row values x (P, N) the sharing function classifies (simulator.simulate's `class_rows`):
         x itself without a backup model, else seen through the fail-safe stop from velocity v with the
-        operator's u_h held (backup.speed_aware_rows; the state's own stop in machine mode)."""
+        operator's u_h held (backup.speed_aware_rows; the state's own stop in machine mode); `slack`: v is
+        the observer's v̂, known to within it."""
         e = self.e
         if e.backup is None:
             return x
         held = None if e.mode is Mode.MACHINE else acceleration(fleet.theta, v, u_h, np.empty_like(u_h))
-        return e.backup.speed_aware_rows(x, v, e.sharing.bands.b2, held)
+        return e.backup.speed_aware_rows(x, v, e.sharing.bands.b2, held, slack)
+
+    def observed(self):
+        """The slack of the backup-safe checks (simulator.simulate's `observed`): under output feedback
+        the backup model's observer error, else None."""
+        e = self.e
+        error = e.backup.model.observer_error if e.backup is not None else ()
+        return error if e.observer and error else None
 
     def govern(self, fleet, q, v_meas, u_s, dec, theta_rate):
         """backup.govern on u_s (n, N, in place) wherever the operator does not have authority; θ̂'s rate
@@ -311,7 +319,7 @@ class StepKernel:
             return
         sel = None if cols.size == u_s.shape[1] else cols
         sent, share = self.e.backup.govern(gather(fleet.theta, sel), gather(q, sel), gather(v_meas, sel),
-                                           gather(u_s, sel), self.e.dt)
+                                           gather(u_s, sel), self.e.dt, self.observed())
         moved = share > 0.0
         if not moved.any():
             return
