@@ -72,8 +72,27 @@ def test_arm_stays_inside_while_its_adapted_inertia_makes_the_loop_stiff(control
     mode reaches ≈ −7400 s⁻¹ with q2 27 mrad from its limit, past a 0.5 ms RK4 step's stability
     bound 2.785/dt. L fell along the solution until the integrator amplified that mode, and then
     rose; the run stopped at t = 2.671 s (ce) and 2.684 s (nce) before the simulator's step control
-    (simulator._advance). Integrated finely (dt = 0.1 ms) the same loop stays ≥ 15 mm inside."""
+    (simulator._advance). Integrated finely (dt = 0.1 ms) the same loop stays ≥ 15 mm inside. (That
+    was with the physical box of "any arm up to 10 kg and 2 m", θ̂₃ ≤ 10; the arm's box now bounds
+    θ̂₃ ≤ 0.14, models/planar_arm.py.)"""
     assert_invariant(S.random_arm_box_case(20001), controller)
+
+
+@pytest.mark.parametrize("seed", [20001, 20002, 20003])
+@pytest.mark.parametrize("controller", ["ce", "nce", "of"])
+def test_the_sampled_arm_at_1_khz_stays_inside_random_joint_boxes(controller, seed):
+    """The controller as it runs — sampled at the arm's 1 kHz, the torque held between samples
+    (sharedctl/sampled.py) — on random joint boxes. With the box of "any arm up to 10 kg and 2 m",
+    θ̂ wandered to 60 times the inertia and random_arm_box_case(20001) diverged at 1 kHz under
+    ce (a non-finite state); the arm's physical box (about three times its θ) keeps the sampled loop
+    inside. (At 500 Hz the output-feedback law, whose observer runs on the same period, is not
+    stable on this arm's 0.01 kg m² inertia near a limit: the arm runs at 1 kHz.)"""
+    from sharedctl.sampled import simulate_sampled
+
+    case = S.random_arm_box_case(seed)
+    trace = simulate_sampled(case.loop(controller), case.q0, case.v0, case.duration, 1e-3)
+    failure = S.invariance_failure(case, controller, trace, dt=1e-3)
+    assert failure is None, failure
 
 
 def test_arm_sharing_properties_hold():

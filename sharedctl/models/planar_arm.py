@@ -56,9 +56,15 @@ class PlanarArm(EulerLagrangeModel):
     n_theta = 5
     coordinate_names = ("q1", "q2")
     parameter_names = ("theta1", "theta2", "theta3", "theta4", "theta5")
-    # positive inertias and gravity moments of an arm of up to ~10 kg and ~2 m
+    # The physical box: each term at most about three times the default arm's θ = (0.327, 0.080, 0.044,
+    # 6.38, 1.57) — a payload at the tip of up to ~1 kg with room to spare; the trust box: 1.5 times it.
+    # A box of "any arm up to 10 kg and 2 m" let θ̂ wander to 60 times the inertia, and the sampled
+    # loop at 500 Hz and 1 kHz went unstable (tests/test_fault_envelope_properties.py). 0 admits
+    # θ̂(0) = 0. docs/control.md §11
     theta_lower = (0.0, 0.0, 0.0, 0.0, 0.0)
-    theta_upper = (20.0, 10.0, 10.0, 200.0, 100.0)
+    theta_upper = (1.0, 0.25, 0.14, 20.0, 5.0)
+    theta_band_lower = (0.0, 0.0, 0.0, 0.0, 0.0)
+    theta_band_upper = (0.5, 0.12, 0.07, 9.6, 2.4)
     # link inertias are ~0.1 kg m²: the omnidirectional robot's gains would be stiff here,
     # and so would its adaptation rate (Y grows like 1/|x| near a joint limit)
     default_gains = {
