@@ -6,6 +6,8 @@ from sharedctl.protocol.messages import Authority, LinkHealth, RobotState, SetCl
 from sharedctl.services.demo.measure import Recorder, deviation, measure
 from sharedctl.services.scenario_files import load
 
+from .zenoh_fakes import Sample
+
 
 def state(q, q_ref, authority, theta=(1.0, 0.0, 0.0)) -> RobotState:
     z = (0.0, 0.0, 0.0)
@@ -76,20 +78,10 @@ def test_without_friction_the_robot_plant_reference_is_the_model_plant_reference
     assert robot_plant["human_authority"] == pytest.approx(model_plant["human_authority"])
 
 
-class _Payload:
-    def __init__(self, data: bytes) -> None:
-        self.data = data
-
-    def to_bytes(self) -> bytes:
-        return self.data
-
-
-class _Sample:
-    """A Zenoh sample as the Recorder's callbacks see it."""
-
-    def __init__(self, message) -> None:
-        from sharedctl.protocol.msgpack_codec import encode_message
-        self.payload = _Payload(encode_message(message))
+def _sample(message) -> Sample:
+    """A state message as the Recorder's callbacks see it."""
+    from sharedctl.protocol.msgpack_codec import encode_message
+    return Sample(encode_message(message))
 
 
 def test_the_runs_t0_is_the_lease_instant_the_controller_reports_not_the_first_states_arrival():
@@ -98,7 +90,7 @@ def test_the_runs_t0_is_the_lease_instant_the_controller_reports_not_the_first_s
 
     rec = Recorder(load("paper_convex").closed_loop()[0].feasible)
     granted = time.time() - 0.4                                    # the controller granted the lease 0.4 s ago
-    rec.on_state(_Sample(dataclasses.replace(state((0.0, 2.0, 0.0), (0.0, 2.0, 0.0), Authority.HUMAN),
+    rec.on_state(_sample(dataclasses.replace(state((0.0, 2.0, 0.0), (0.0, 2.0, 0.0), Authority.HUMAN),
                                              lease_since=granted)))
     assert rec.run_clock == "lease" and rec.lease_wall == granted
     assert time.monotonic() - rec.operator_start == pytest.approx(0.4, abs=0.05)
@@ -108,7 +100,7 @@ def test_without_a_reported_lease_instant_the_first_state_naming_a_holder_starts
     import time
 
     rec = Recorder(load("paper_convex").closed_loop()[0].feasible)
-    rec.on_state(_Sample(state((0.0, 2.0, 0.0), (0.0, 2.0, 0.0), Authority.HUMAN)))
+    rec.on_state(_sample(state((0.0, 2.0, 0.0), (0.0, 2.0, 0.0), Authority.HUMAN)))
     assert rec.run_clock == "first_state" and time.monotonic() - rec.operator_start == pytest.approx(0.0, abs=0.05)
 
 

@@ -10,18 +10,7 @@ import time
 from sharedctl.services.faults.spec import parse, pipeline
 from sharedctl.services.faults.zenoh_relay import ZenohRelay
 
-
-class _Payload:
-    def __init__(self, data: bytes) -> None:
-        self.data = data
-
-    def to_bytes(self) -> bytes:
-        return self.data
-
-
-class _Sample:
-    def __init__(self, key: str, data: bytes) -> None:
-        self.key_expr, self.payload = key, _Payload(data)
+from .zenoh_fakes import Sample
 
 
 class _Publisher:
@@ -50,10 +39,10 @@ def test_messages_before_arming_do_not_dilute_the_measured_delay():
     relay.sessions = {"controller": None, "console": None}     # publishers exist: no session is asked
     origin = time.monotonic()                       # the run's t = 0 (lease instant) ...
     for i in range(5):                              # ... then messages the unarmed relay passes at once,
-        relay._on_sample("operator", _Sample(key, b"early%d" % i))
+        relay._on_sample("operator", Sample(b"early%d" % i, key))
     relay.arm(origin)                               # still queued when it is armed late, t = 0 in the past
     for i in range(5):
-        relay._on_sample("operator", _Sample(key, b"late%d" % i))
+        relay._on_sample("operator", Sample(b"late%d" % i, key))
     _drain(relay)
 
     report = relay.report()["operator"]
