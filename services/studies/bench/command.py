@@ -165,6 +165,8 @@ def ratios(report: dict) -> dict:
         "operator_to_torque_over_zenoh_floor_p50": over("latency.operator_to_torque_us.p50",
                                                         "latency.zenoh_floor_us.p50"),
         "ce_step_over_nce_step": over("control_step_us.ce.median", "control_step_us.nce.median"),
+        "ce_step_over_ce_step_without_backup": over("control_step_us.ce.median",
+                                                    "control_step_us.ce.without_backup.median"),
         "of_step_over_ce_step": over("control_step_us.of.median", "control_step_us.ce.median"),
         "ce_step_in_numpy_calls": over("control_step_us.ce.median",
                                        "control_step_detail.floors_ns.numpy_ufunc_3_ns") and

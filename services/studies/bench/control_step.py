@@ -69,16 +69,22 @@ def step_times(law: str, seconds: float, repeats: int) -> dict:
 def interleaved_step_times(laws, seconds: float, repeats: int) -> dict:
     """`step_times` of several laws measured in turns: round r replays every law once, so a slow spell
     of the host (a neighbour on the hypervisor, another job) falls on every law alike rather than on
-    whichever law was being timed. Each law is replayed once untimed first (caches, branch paths)."""
+    whichever law was being timed. Each law is replayed once untimed first (caches, branch paths). With
+    ce, its inputs are also replayed through a controller without the fail-safe stop (`backup` None), in
+    the same rounds: `ce.without_backup`, the price of the backup-safe checks in the same run."""
     replays = {law: _replay_inputs(_scenario(), law, seconds) for law in laws}
+    if "ce" in replays:                 # the same inputs through a controller without the fail-safe stop
+        loop, q0, _, inputs = replays["ce"]
+        replays[_WITHOUT_BACKUP] = (loop, q0, SharedController(loop.model, loop.feasible, loop.controller,
+                                                               loop.sharing, loop.reference, None), inputs)
     for replay in replays.values():
         _run(*replay)                                        # warm-up
-    runs = {law: [] for law in laws}
+    runs = {name: [] for name in replays}
     for _ in range(repeats):
-        for law in laws:
-            runs[law].append(_run(*replays[law]))
+        for name in replays:
+            runs[name].append(_run(*replays[name]))
     result = {}
-    for law in laws:
+    for law in replays:
         times = np.concatenate([r[0] for r in runs[law]])
         engaged = np.concatenate([r[1] for r in runs[law]])
         head = percentiles(times[engaged])
@@ -89,7 +95,12 @@ def interleaved_step_times(laws, seconds: float, repeats: int) -> dict:
             "round_medians": [float(np.median(r[0][r[1]])) if r[1].any() else None for r in runs[law]],
             "all": _brief(percentiles(times)), "operator_only": _brief(percentiles(times[~engaged])),
         }
+    if _WITHOUT_BACKUP in result:
+        result["ce"]["without_backup"] = result.pop(_WITHOUT_BACKUP)
     return result
+
+
+_WITHOUT_BACKUP = "ce without the backup"
 
 
 def _brief(stats: dict) -> dict:
