@@ -70,13 +70,12 @@ def interleaved_step_times(laws, seconds: float, repeats: int) -> dict:
     """`step_times` of several laws measured in turns: round r replays every law once, so a slow spell
     of the host (a neighbour on the hypervisor, another job) falls on every law alike rather than on
     whichever law was being timed. Each law is replayed once untimed first (caches, branch paths). With
-    ce, its inputs are also replayed through a controller without the fail-safe stop (`backup` None), in
-    the same rounds: `ce.without_backup`, the price of the backup-safe checks in the same run."""
+    ce, the scenario is also replayed with `[backup] enabled = false`, in the same rounds:
+    `ce.without_backup`, the price of the backup-safe checks in the same run (its own closed loop: on the
+    backup-safe loop's states, farther from the wall, the paper's loop would not engage at all)."""
     replays = {law: _replay_inputs(_scenario(), law, seconds) for law in laws}
-    if "ce" in replays:                 # the same inputs through a controller without the fail-safe stop
-        loop, q0, _, inputs = replays["ce"]
-        replays[_WITHOUT_BACKUP] = (loop, q0, SharedController(loop.model, loop.feasible, loop.controller,
-                                                               loop.sharing, loop.reference, None), inputs)
+    if "ce" in replays:                 # the same scenario without the fail-safe stop, in the same rounds
+        replays[_WITHOUT_BACKUP] = _replay_inputs(dict(_scenario(), backup={"enabled": False}), "ce", seconds)
     for replay in replays.values():
         _run(*replay)                                        # warm-up
     runs = {name: [] for name in replays}
