@@ -19,7 +19,7 @@ from pathlib import Path
 ROWS = (
     ("`control_step_us.ce.median` (machine law engaged, µs)", "≤ 50", ["control_step_us.ce.median"], 1),
     ("`control_step_us.ce.thread_cpu_median`", "", ["control_step_us.ce.thread_cpu_median"], 1),
-    ("`control_step_us.ce.without_backup.median` (the same inputs, no fail-safe stop)", "",
+    ("`control_step_us.ce.without_backup.median` (`[backup] enabled = false`)", "",
      ["control_step_us.ce.without_backup.median"], 1),
     ("`control_step_us.{nce,of}.median`", "", ["control_step_us.nce.median", "control_step_us.of.median"], 1),
     ("`control_step_us.ce.operator_only.median`", "", ["control_step_us.ce.operator_only.median"], 1),
