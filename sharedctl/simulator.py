@@ -3,7 +3,8 @@
 The continuous state is [q, q̇, θ̂, law state, observer state]. Every step of length dt:
 
 1. the sharing function (sharing.py) samples the state and decides authority, group, law
-   role and the blend weights — a hybrid system's discrete part, held over the step;
+   role and the blend weights — a hybrid system's discrete part, held over the step; with a
+   backup model, so is the governor's share λ (backup.govern, found from the step's start);
 2. the continuous part is integrated by one classical Runge–Kutta-4 step with the law
    evaluated at every stage (so Lyapunov identities hold to integration accuracy); a step
    too long for the stiffness the law gives the loop is replaced by two half steps (`_advance`),
@@ -225,6 +226,8 @@ def simulate(loop: ClosedLoop, q0, v0, duration: float, dt: float) -> Trace:
         return speed_aware_rows(backup, feasible, feasible.row_values(q_, v_), v_, loop.sharing.bands.b2, held,
                                 slack)
 
+    held_share = [0.0]          # the governor's λ of the current step (`rates` with want_signals finds it)
+
     def rates(t, q_, v_, th_, s_, o_, decision, want_signals=False):
         desired = human.desired(t)
         v_meas = velocity_for_control(q_, v_, o_)
@@ -248,9 +251,15 @@ def simulate(loop: ClosedLoop, q0, v0, duration: float, dt: float) -> Trace:
                 th_dot = out.theta_dot
         u_s = shared_input(decision, u_h, u_f)
         if backup is not None and decision.authority is not Authority.HUMAN:
-            governed = govern(backup, model, feasible, q_, v_meas, u_s, dt, observed)
-            if governed.share > 0.0:
-                u_s, th_dot = governed.u, zero_theta       # the law's update assumes u_f acts; it did not
+            # the governor is part of the step's decision: its share λ is found at the step's start and
+            # held over the stages (the fallback u_g at each stage's own state), as the sampled loop
+            # holds one governed command per period
+            if want_signals:
+                held_share[0] = govern(backup, model, feasible, q_, v_meas, u_s, dt, observed).share
+            share = held_share[0]
+            if share > 0.0:
+                u_g = model.inverse_dynamics(q_, v_meas, backup.fallback_acceleration(v_meas))
+                u_s, th_dot = u_s + share * (u_g - u_s), zero_theta   # the law's update assumes u_f acts; it did not
         if engaged:
             s_dot = law.with_applied_input(s_dot, u_s)
         acc = model.acceleration(q_, v_, u_s)
@@ -383,7 +392,7 @@ def _advance(rates, decision, t, state, h, d1, halvings=0):
     compared with two half steps and kept when it differs from them by at most STEP_AGREEMENT of
     their change. For a linear decaying mode that share is ½ at hλ ≈ −2.4 and 1 at RK4's bound
     −2.785, so no step that amplifies a mode is kept; where ρ̂ is set off by a rate that is not
-    smooth over the step (a governor's or an observer's switch) the step is accurate and the share
+    smooth over the step (an observer's switch) the step is accurate and the share
     small (below 0.1 on the packaged scenarios and the property tests' cases). A kept step is the
     plain RK4 step: the check changes nothing where the step is stable. A stage that leaves the
     active group raises _Escaped, refined or not."""

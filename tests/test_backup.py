@@ -411,3 +411,37 @@ def test_a_loss_of_actuation_at_a_random_instant_of_a_random_case_ends_inside(ca
     """Random convex sets and random pushes: the sampled loop on the plant, the controller lost at
     a random point of the run, the stop measured on the plant."""
     assert _lost_at(case, controller, instant * case.duration) > 0.0, (case.label, controller, instant)
+
+
+def test_the_simulator_searches_the_governor_s_share_once_a_step_and_holds_it_over_the_stages(monkeypatch):
+    """simulator.simulate treats λ as part of the step's decision (docs/control.md §10): one search per
+    step, from the step's start, and the sample records the command that search sent (searched at every
+    RK stage, the rate switched inside a step wherever the state sat at the envelope's edge, and the
+    step-size control halved such steps to their floor: 1,700 rate evaluations a step for one robot of
+    the bench's fleet)."""
+    import sharedctl.simulator as sim
+    from sharedctl.human import AdversarialOperator, LineTrajectory
+    from sharedctl.simulator import ClosedLoop, simulate
+
+    scenario = load("adversarial_wall")
+    base = scenario.closed_loop("ce")[0]
+    target = np.array([0.3, 5.0, 0.0])
+    loop = ClosedLoop(base.model, base.feasible, AdversarialOperator(LineTrajectory(target, np.zeros(3)),
+                                                                     np.full(3, 30.0), target, 1.0),
+                      base.controller, base.sharing, base.reference, base.theta_hat0, base.backup)
+    calls, sent = [], []
+    real = sim.govern
+
+    def counted(*args):
+        out = real(*args)
+        calls.append(args[4].copy())
+        sent.append(out.u)
+        return out
+
+    monkeypatch.setattr(sim, "govern", counted)
+    trace = simulate(loop, np.array([0.0, 3.9, 0.0]), np.array([0.0, 0.8, 0.0]), 0.2, 0.001)
+    machine = np.flatnonzero(trace.authority != 0)
+    assert machine.size > 0, "the machine never acted: the case would test nothing"
+    assert len(calls) == machine.size <= trace.t.size
+    np.testing.assert_allclose(np.array(sent), trace.u_s[machine], rtol=0, atol=1e-12)
+    assert any(not np.allclose(s, c) for s, c in zip(sent, calls)), "the governor never acted"

@@ -316,6 +316,8 @@ class BackupTable:
             with np.errstate(divide="ignore", invalid="ignore"):     # f_lo = −inf: the midpoint
                 lam = (low * fh - h * fl) / (fh - fl)
             lam = np.where((low < lam) & (lam < h), lam, 0.5 * (low + h))
+            lam = np.minimum(np.maximum(np.round(lam / _LAMBDA_RESOLUTION) * _LAMBDA_RESOLUTION,
+                                        low + _LAMBDA_RESOLUTION), h - _LAMBDA_RESOLUTION)   # backup._on_grid
             m = self._merit(q[:, cols], v[:, cols], x[:, cols], a[:, cols] + lam * step[:, cols], dt,
                             _take(slack, cols), None if segment is None else _segment_of(segment, cols))
             passed = m >= 0.0

@@ -7,9 +7,10 @@
    and θ̂ carries over (θ̂ + β when leaving (13));
 2. one classical RK4 step of the state [q, q̇, θ̂, law state, observer], the law evaluated at
    every stage on each robot's own group, and u_s, unless the operator has authority, made
-   backup-safe by the governor (backup.py's govern; where it moves u_s, θ̂ holds for that
-   stage); θ̂ moves only under full machine authority (its rate ends with the robust update's
-   leakage), and is projected onto the last law's physical box B after the step when it projects;
+   backup-safe by the governor (backup.py's govern, its share λ found at the step's start and
+   held over the stages; where it moves u_s, θ̂ holds for the step); θ̂ moves only under full
+   machine authority (its rate ends with the robust update's leakage), and is projected onto the
+   last law's physical box B after the step when it projects;
 3. a robot whose RK stage leaves its active group's polytope (the law has no value there), or
    whose state turns non-finite, stops, with the rows simulator.simulate records for it.
 
@@ -29,7 +30,7 @@ from .geometry import (
     select_group,
 )
 from .laws import GroupFrame, coordinates, gather, projected_reference, scatter
-from .plant import acceleration
+from .plant import acceleration, regressor_times
 from .results import Rows
 
 
@@ -230,7 +231,7 @@ class StepKernel:
             elif mach.any():
                 scatter(out[L.theta], sel, np.where(mach, theta_dot, 0.0))
         if e.backup is not None:
-            self.govern(fleet, q, v_meas, u_s, dec, out[L.theta])
+            self.govern(fleet, q, v_meas, u_s, dec, out[L.theta], record)
         for law, _, sel, _, _ in plan:
             if law.applied_input is not None:                   # a filter of u_s (with_applied_input)
                 rows = slice(L.law_state.start + law.applied_input.start, L.law_state.start + law.applied_input.stop)
@@ -310,21 +311,34 @@ class StepKernel:
         error = e.backup.model.observer_error if e.backup is not None else ()
         return error if e.observer and error else None
 
-    def govern(self, fleet, q, v_meas, u_s, dec, theta_rate):
+    def govern(self, fleet, q, v_meas, u_s, dec, theta_rate, start: bool):
         """backup.govern on u_s (n, N, in place) wherever the operator does not have authority; θ̂'s rate
         (`theta_rate`, in place) is zeroed where the governor moved u_s: the law's update assumes
-        u_f acts, and it did not."""
-        cols = np.flatnonzero(dec.authority != HUMAN)
+        u_f acts, and it did not. As in simulator.simulate, λ is found at the step's `start` and held
+        over the later stages, the fallback u_g at each stage's own state."""
+        if start:
+            self._moved = np.zeros(0, dtype=np.intp)
+            cols = np.flatnonzero(dec.authority != HUMAN)
+            if cols.size == 0:
+                return
+            sel = None if cols.size == u_s.shape[1] else cols
+            sent, share = self.e.backup.govern(gather(fleet.theta, sel), gather(q, sel), gather(v_meas, sel),
+                                               gather(u_s, sel), self.e.dt, self.observed())
+            moved = share > 0.0
+            if not moved.any():
+                return
+            scatter(u_s, sel, sent)
+            self._moved = np.flatnonzero(moved) if sel is None else cols[moved]
+            self._share = share[moved]
+            theta_rate[:, self._moved] = 0.0
+            return
+        cols = self._moved
         if cols.size == 0:
             return
-        sel = None if cols.size == u_s.shape[1] else cols
-        sent, share = self.e.backup.govern(gather(fleet.theta, sel), gather(q, sel), gather(v_meas, sel),
-                                           gather(u_s, sel), self.e.dt, self.observed())
-        moved = share > 0.0
-        if not moved.any():
-            return
-        scatter(u_s, sel, sent)
-        theta_rate[:, np.flatnonzero(moved) if sel is None else cols[moved]] = 0.0
+        theta, qc, vc, uc = (arr.take(cols, axis=1) for arr in (fleet.theta, q, v_meas, u_s))
+        u_g = regressor_times(vc, vc, self.e.backup.fallback_acceleration(vc), theta)   # model.inverse_dynamics
+        u_s[:, cols] = uc + self._share * (u_g - uc)
+        theta_rate[:, cols] = 0.0
 
     def escape_rows(self, t, q, v):
         """The row simulator.simulate records for a state an RK stage reached outside the group."""

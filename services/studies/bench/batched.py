@@ -20,6 +20,7 @@ scaling tables (robots, constraint groups) in Markdown.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import math
 import multiprocessing
 import os
@@ -103,12 +104,14 @@ def _batch_rate(problem: BatchProblem, seconds: float, chunk: int = 8192, pool=N
 
 def measure_batched(quick: bool) -> dict:
     """{"robots", "steps_per_s", "scalar_steps_per_s", "speedup_vs_scalar"} (+ "processes", "one_process",
-    "cpu"): medians over interleaved repeats."""
+    "without_backup" — the same fleet and processes without the fail-safe stop's governor —, "cpu"):
+    medians over interleaved repeats."""
     p = QUICK if quick else FULL
     loop = _loop()
     problem = fleet(loop, p["robots"])
+    bare = fleet(dataclasses.replace(loop, backup=None), p["robots"])    # the same fleet without the governor
     workers = max(1, min(os.cpu_count() or 1, 2))
-    scalar, one, many = [], [], []
+    scalar, one, many, without = [], [], [], []
     # spawn, not fork: the caller may hold threads (Zenoh, CAN) that a forked child must not inherit
     with multiprocessing.get_context("spawn").Pool(workers) as pool:
         pool.map(_run_part, [(problem.take(slice(0, 8)), 10 * DT, 8)] * workers)    # start-up outside the timing
@@ -116,6 +119,7 @@ def measure_batched(quick: bool) -> dict:
             scalar.append(_scalar_rate(loop, problem, p["scalar_robots"], p["seconds"]))
             one.append(_batch_rate(problem, p["seconds"]))
             many.append(_batch_rate(problem, p["seconds"], pool=pool, parts=workers))
+            without.append(_batch_rate(bare, p["seconds"], pool=pool, parts=workers))
 
     def med(rows, k):
         return float(np.median([r[k] for r in rows]))
@@ -125,6 +129,7 @@ def measure_batched(quick: bool) -> dict:
         "robots": p["robots"], "steps_per_s": med(many, 0), "scalar_steps_per_s": scalar_rate,
         "speedup_vs_scalar": med(many, 0) / scalar_rate, "processes": workers,
         "one_process": {"steps_per_s": med(one, 0), "speedup_vs_scalar": med(one, 0) / scalar_rate},
+        "without_backup": {"steps_per_s": med(without, 0)},
         "cpu": {"steps_per_s": med(many, 1), "one_process_steps_per_s": med(one, 1),
                 "scalar_steps_per_s": med(scalar, 1), "speedup_vs_scalar": med(one, 1) / med(scalar, 1)},
     }
