@@ -37,7 +37,9 @@ def answer(payload: bytes, lease: OperatorLease, guard: ReplayGuard, rejections:
         rejections[f"lease_{reason}"] += 1
         return _reply(request.seq, wall_now, False, lease, now, f"request dropped: {reason}")
     decision = lease.request(request.operator_id, request.session_id, request.action, now)
-    if not decision.granted:
+    if decision.granted:
+        guard.pin(f"{request.operator_id}/{request.session_id}")    # kept through floods (replay_guard.py)
+    else:
         rejections["lease_refused"] += 1
     return LeaseReply(request_seq=request.seq, time=max(wall_now, 0.0), granted=decision.granted,
                       holder=decision.holder, reason=decision.reason[:MAX_TEXT_LEN])

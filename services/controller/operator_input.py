@@ -113,6 +113,8 @@ class OperatorInputPolicy:
                                   now, wall_now)
         if reason is None:
             reason = self.lease.admit_command(command.operator_id, command.session_id, command.control_request, now)
+            if reason is None:
+                self.guard.pin(f"{command.operator_id}/{command.session_id}")   # the lease let it act
         if reason == "released":
             return False                         # the holder let go: not a rejection
         if reason is not None:

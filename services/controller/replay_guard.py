@@ -22,8 +22,9 @@ The first message of a session has no reference, nor has one after `window` seco
 taken message (so a lasting change of the delay is accepted again after at most `window`
 seconds): only the skew bound applies to those. Without a
 receive wall time (`wall_now=None`) only the order is checked. At most `max_sessions` sessions
-are remembered (the least recently active are forgotten first), so memory is bounded whatever
-a sender does.
+are remembered besides the pinned ones (the least recently active are forgotten first), so memory
+is bounded whatever a sender does; the controller pins every session the lease let act (`pin`), so a
+flood of other sessions cannot push the holder's out and have a captured message of it taken as new.
 """
 from __future__ import annotations
 
@@ -51,6 +52,7 @@ class ReplayGuard:
     window: float = DEFAULT_WINDOW
     max_sessions: int = DEFAULT_MAX_SESSIONS
     _sessions: OrderedDict = field(default_factory=OrderedDict)
+    _pinned: OrderedDict = field(default_factory=OrderedDict)      # sessions the lease let act (`pin`)
 
     def __post_init__(self) -> None:
         if not self.max_age > 0 or not self.window > 0 or self.max_sessions < 1:
@@ -73,8 +75,7 @@ class ReplayGuard:
                 return "stale"
         if track is None:
             track = self._sessions[session_id] = _Session(seq)
-            while len(self._sessions) > self.max_sessions:
-                self._sessions.popitem(last=False)
+            self._forget_beyond_limit()
         self._sessions.move_to_end(session_id)
         track.newest_seq = seq
         if offset is not None:
@@ -82,6 +83,25 @@ class ReplayGuard:
                 track.offsets.pop()
             track.offsets.append((now, offset))
         return None
+
+    def pin(self, session_id: str) -> None:
+        """Keep a remembered session through floods: the controller pins a session once the lease let it
+        act. Forgetting takes the least recently active unpinned session; pinned ones go (oldest pin
+        first) only when they alone exceed `max_sessions`. Without pins, sessions that never held the
+        lease could push the holder's out, and a captured command of it would then pass as new."""
+        track = self._sessions.get(session_id)
+        if track is not None and session_id not in self._pinned:
+            self._pinned[session_id] = None
+            while len(self._pinned) > self.max_sessions:
+                self._pinned.popitem(last=False)
+
+    def _forget_beyond_limit(self) -> None:
+        """Down to `max_sessions` unpinned sessions, the least recently active first (the pinned are
+        a subset of the remembered, at most `max_sessions` of them)."""
+        excess = len(self._sessions) - len(self._pinned) - self.max_sessions
+        if excess > 0:
+            for key in [k for k in self._sessions if k not in self._pinned][:excess]:
+                del self._sessions[key]
 
     def age(self, session_id: str, send_time: float, now: float, wall_now: float) -> float:
         """The relative age (s) a message of this session sent at `send_time` would have now (0 without a reference)."""

@@ -138,3 +138,19 @@ def test_holder_since_is_the_grant_instant_and_renewals_keep_it():
     assert lease.holder_since is None
     lease.request("bob", "b1", TAKE, 7.2)
     assert lease.holder_since == 7.2
+
+
+def test_a_flood_of_lease_queries_cannot_make_a_captured_take_of_the_holder_new():
+    """Threat: refused sessions push the holder's out of the lease guard's memory; a captured take of the holder
+    re-sent after it released would then take the lease back for it (docs/security.md)."""
+    lease, guard, rejections = OperatorLease(), ReplayGuard(), Counter()
+    take = request("alice", "a1", 1, "take")
+    assert ask(lease, guard, rejections, take, 0.0).granted
+    assert ask(lease, guard, rejections, request("alice", "a1", 2, "release"), 0.1).granted
+    assert ask(lease, guard, rejections, request("bob", "b1", 1, "take"), 0.2).granted
+    for k in range(3 * 64):
+        ask(lease, guard, rejections, request(f"mallory{k}", f"m{k}", 1, "take"), 0.3)
+    assert ask(lease, guard, rejections, request("bob", "b1", 2, "release"), 0.4).granted
+    reply = ask(lease, guard, rejections, take, 0.5)                      # captured and re-sent
+    assert not reply.granted and lease.holder is None
+    assert rejections["lease_out_of_order_seq"] == 1

@@ -147,3 +147,19 @@ def test_the_input_follows_every_new_command_and_every_change_of_hands_off():
         stale, status = policy.operator_input(now + 0.31, POSE)
         assert status.hands_off and stale.intent == 0.0 and not np.any(stale.force)
         now += 0.5
+
+
+def test_a_flood_of_sessions_without_the_lease_cannot_make_a_captured_command_of_the_holder_new():
+    """Threat: sessions that never held the lease push the holder's out of the replay guard's memory, and a
+    captured command of the holder then passes as new and renews the lease (docs/security.md)."""
+    policy = OperatorInputPolicy(KP)
+    captured = command(7, request=ControlRequest.TAKE)
+    assert offer(policy, captured, now=10.0) and policy.lease.holder_id == "op1"
+    for k in range(3 * 64):
+        junk = OperatorCommand(operator_id=f"intruder{k}", session_id=f"x{k}", seq=1, send_time=100.0,
+                               joystick=(1.0, 1.0, 0.0), q_d=(0.0, 0.0, 0.0), qd_d=(0.0, 0.0, 0.0),
+                               qdd_d=(0.0, 0.0, 0.0), deadman=True, estop=False, control_request=ControlRequest.NONE)
+        assert not offer(policy, junk, now=10.0 + 1e-4 * k)
+    accepted = policy.accepted
+    assert not offer(policy, captured, now=10.2)
+    assert policy.accepted == accepted and policy.rejections["duplicate_seq"] == 1

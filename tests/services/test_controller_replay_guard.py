@@ -77,3 +77,25 @@ def test_limits_must_be_positive():
         ReplayGuard(max_age=0.0)
     with pytest.raises(ValueError):
         ReplayGuard(max_skew=-1.0)
+
+
+def test_a_pinned_session_outlives_any_flood_of_other_sessions():
+    guard = ReplayGuard(max_sessions=4)
+    admit(guard, 5, 0.0, 0.01, session="holder")
+    guard.pin("holder")
+    for k in range(100):
+        admit(guard, 1, 0.0, 0.01, session=f"junk{k}")
+    assert guard.sessions == 5                                   # 4 unpinned and the pinned one
+    assert admit(guard, 5, 0.0, 0.01, session="holder") == "duplicate_seq"
+    assert admit(guard, 6, 0.0, 0.01, session="holder") is None
+
+
+def test_pins_are_bounded_too_and_a_dropped_pin_is_forgotten_like_any_session():
+    guard = ReplayGuard(max_sessions=2)
+    for k in range(5):
+        admit(guard, 1, 0.0, 0.01, session=f"p{k}")
+        guard.pin(f"p{k}")
+    for k in range(10):
+        admit(guard, 1, 0.0, 0.01, session=f"junk{k}")
+    assert guard.sessions == 4                                   # 2 pinned (the newest pins), 2 unpinned
+    assert admit(guard, 1, 0.0, 0.01, session="p4") == "duplicate_seq"
