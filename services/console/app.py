@@ -55,7 +55,7 @@ class ConsoleOptions:
     robot_id: str = "robot1"
     operator_id: str = "operator"
     rate: float = 50.0               # Hz
-    deadman_mode: str = "toggle"
+    deadman_mode: str = "hold"
     zenoh_config: str | None = None  # Zenoh JSON5 file (credentials, TLS, mode); endpoints above replace its own
 
 

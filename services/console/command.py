@@ -32,8 +32,9 @@ def add_parser(subparsers) -> None:
     p.add_argument("--robot-id", default="robot1", help="robot id in the key expressions (default robot1)")
     p.add_argument("--operator-id", default="operator", help="operator id sent with every command")
     p.add_argument("--rate", type=float, default=50.0, metavar="HZ", help="command rate (default 50)")
-    p.add_argument("--deadman", choices=("toggle", "hold"), default="toggle",
-                   help="space toggles the deadman, or holds it while the key repeats (default toggle)")
+    p.add_argument("--deadman", choices=("hold", "toggle"), default="hold",
+                   help="the deadman holds while space repeats (default), or space toggles it: toggle latches, "
+                        "so it is not a deadman (unsafe)")
     add_service_config_argument(p)
     p.set_defaults(handler=run)
 

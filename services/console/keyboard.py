@@ -7,7 +7,7 @@ moves towards 0 at 1/`return_time` per second (full deflection is centred in `re
 ~0.3 s). A held key keeps re-deflecting the handle; a released one lets it spring back.
 
 Keys: arrows or W/A/S/D deflect x (right/left) and y (up/down), Q/E yaw (counter-clockwise /
-clockwise); space is the deadman (toggle, or hold: on while space keeps repeating); X or Esc
+clockwise); space is the deadman (on while space keeps repeating; `toggle` latches it: unsafe); X or Esc
 requests an emergency stop, C clears that request; T / R ask to take / release control (sent
 for `request_time` seconds).
 """
@@ -67,8 +67,9 @@ class VirtualJoystick:
     step: float = 0.5            # deflection added per press (normalised units)
     hold: float = 0.06           # s a press holds the handle before the spring acts
     return_time: float = 0.3     # s for the spring to centre a full deflection
-    deadman_mode: str = "toggle"  # "toggle" | "hold"
-    deadman_hold: float = 0.6    # s the deadman stays on after a space press in "hold" mode
+    deadman_mode: str = "hold"   # "hold" | "toggle" (latches: not a deadman, docs/console.md)
+    deadman_hold: float = 0.7    # s the deadman stays on after a space press in "hold" mode (a terminal
+                                 # reports no key release; 0.7 s spans the usual 0.66 s first-repeat delay)
     request_time: float = 0.5    # s a take/release request is repeated
     reach: np.ndarray = field(default_factory=lambda: np.array([0.5, 0.5, 0.5]))  # m, m, rad at full deflection
 

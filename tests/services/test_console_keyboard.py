@@ -88,3 +88,21 @@ def test_the_wish_is_the_pose_offset_by_reach_times_deflection():
     stick = VirtualJoystick(reach=np.array([0.5, 0.5, 0.5]))
     stick.press("right", 0.0)
     assert np.allclose(stick.wish(np.array([1.0, 2.0, 0.1]), 0.0), [1.25, 2.0, 0.1])
+
+
+def test_the_deadman_holds_by_default_and_drops_when_space_stops_repeating():
+    """Threat: a toggled deadman latches, so an operator who lets go leaves it on (docs/security.md). The console's
+    default, from the joystick to the command line and the site config, holds it only while space repeats."""
+    import tomllib
+    from pathlib import Path
+
+    from sharedctl.services.console.app import ConsoleOptions
+    from sharedctl.services.cli import build_parser
+
+    stick = VirtualJoystick()
+    stick.press("space", 1.0)
+    assert stick.deadman(1.0 + 0.66) and not stick.deadman(1.0 + 0.75)
+    assert ConsoleOptions.__dataclass_fields__["deadman_mode"].default == "hold"
+    assert build_parser().parse_args(["console"]).deadman == "hold"
+    site = tomllib.loads((Path(__file__).parents[2] / "deploy" / "config" / "console.toml").read_text())
+    assert site.get("deadman", site.get("console", {}).get("deadman")) == "hold"
