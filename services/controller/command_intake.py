@@ -7,10 +7,11 @@ preempted while holding it (on a busy CPU, behind a real-time thread) stalls the
 behind it. The price: a command is stamped when taken, at most one receive slice of the loop
 (0.5 ms) after it arrived — well inside the policy's age limits (replay_guard.py).
 
-Whoever takes or applies holds the daemon's lock (the loop, or a lease query on a Zenoh thread), so
-two threads never interleave the order. A full queue refuses and counts (`command_queue_full`); a
-full channel holds the sender back inside Zenoh (nothing is dropped unseen). Neither fills while the
-loop runs: it empties both every 0.5 ms.
+Only the loop takes and applies (lease queries wait in their own channel, zenoh_links.py), under the
+daemon's lock. Each `apply` judges at most `BUDGET` payloads, so a flood costs the loop a bounded
+time per call. A full queue refuses and counts (`command_queue_full`); a full channel holds the
+sender back inside Zenoh (nothing is dropped unseen). An operator's 50 Hz never fills either: the
+loop judges up to `BUDGET` every 0.5 ms.
 """
 from __future__ import annotations
 
@@ -21,6 +22,7 @@ import zenoh
 
 MAX_PENDING = 1000        # payloads taken from the channel and not yet judged
 CHANNEL_CAPACITY = 1000   # samples Zenoh holds for the loop
+BUDGET = 16               # payloads judged per `apply` (≈ 0.5 ms of decoding and judging at most)
 
 
 def channel():
@@ -61,10 +63,11 @@ class CommandIntake:
         self.pending.append((payload, self.clock(), self.wall_clock()))
 
     def apply(self) -> None:
-        """Take what waits in the channel, then hand every queued payload to the policy in order."""
+        """Take what waits in the channel, then hand the oldest `BUDGET` queued payloads to the policy in
+        order (the rest wait for the next call: a flood costs the loop a bounded time per call)."""
         self.take()
         pending = self.pending
-        while pending:
+        for _ in range(min(BUDGET, len(pending))):
             payload, now, wall = pending.popleft()
             self.policy.offer(payload, now, wall)
         if self.overflowed:

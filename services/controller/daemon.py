@@ -34,11 +34,11 @@ flag; wheel feedback older than `feedback_timeout` while running; an axis report
 or leaving closed loop; a non-finite command. An operator command with control_request
 "take" (and estop false) sent after the estop re-arms the axes.
 
-Operator authority: a Zenoh queryable on `…/control/lease` answers take/release requests
-(lease_queries.py → lease.py); only the lease holder's commands drive, an estop from anyone
-stops (operator_input.py); replayed, out-of-order and stale messages are dropped
-(replay_guard.py). Every refusal is counted by reason (exit summary, `rejection` events) and
-the total goes out as `link.rejected_messages`.
+Operator authority: a Zenoh queryable on `…/control/lease` answers take/release requests, polled
+by the loop like the commands (zenoh_links.py, lease_queries.py → lease.py); only the lease
+holder's commands drive, an estop from anyone stops (operator_input.py); replayed, out-of-order
+and stale messages are dropped (replay_guard.py). Every refusal is counted by reason (exit
+summary, `rejection` events) and the total goes out as `link.rejected_messages`.
 """
 from __future__ import annotations
 

@@ -2,19 +2,28 @@
 liveliness token), the operator commands it takes (command_intake.py) and the lease queries it
 answers (lease_queries.py → lease.py).
 
-A lease query is answered on a Zenoh callback thread under the daemon's lock, after the operator
-commands that arrived before it are judged: a take or release never overtakes a command.
+Lease queries, like operator commands, wait in a Zenoh FIFO channel that the loop polls: no Python
+callback thread takes the daemon's lock, so no flood of queries or commands can hold the loop. Each
+poll judges at most `command_intake.BUDGET` commands, then answers at most `LEASE_BUDGET` queries:
+a take or release never overtakes a command that was judged before it, and the loop's work per
+poll is bounded whatever arrives (what is left waits for the next poll, 0.5 ms later; a full
+channel holds the sender back inside Zenoh).
 """
 from __future__ import annotations
 
 import sys
 import time
 
+import zenoh
+
 from sharedctl.protocol import keys
 from sharedctl.protocol.msgpack_codec import encode_message
 
 from . import command_intake, lease_queries
 from .command_intake import CommandIntake
+
+LEASE_CAPACITY = 64   # lease queries Zenoh holds for the loop
+LEASE_BUDGET = 4      # lease queries answered per poll
 
 
 class ControllerLinks:
@@ -30,25 +39,29 @@ class ControllerLinks:
         self.token = session.liveliness().declare_token(keys.alive_key(robot_id, role))
         self.subscriber = session.declare_subscriber(keys.operator_cmd_key(robot_id), command_intake.channel())
         self.intake = CommandIntake(self.subscriber, policy)
-        self.queryable = session.declare_queryable(keys.lease_key(robot_id), self.on_lease_query)
+        self.queryable = session.declare_queryable(keys.lease_key(robot_id),
+                                                   zenoh.handlers.FifoChannel(LEASE_CAPACITY))
 
     def apply_commands(self) -> None:
-        """The operator commands that arrived, judged in arrival order (caller holds `lock`).
+        """The operator commands that arrived, judged in arrival order, then the lease queries waiting
+        (caller holds `lock`): at most `command_intake.BUDGET` and `LEASE_BUDGET` of them.
 
-        Called by the loop between CAN frames and before each tick, and before a lease query is
-        answered, so a take or release is judged after every command that arrived before it."""
+        Called by the loop between CAN frames and before each tick."""
         self.intake.apply()
+        for _ in range(LEASE_BUDGET):
+            query = self.queryable.try_recv()
+            if query is None:
+                return
+            self.answer_lease_query(query)
 
-    def on_lease_query(self, query) -> None:
-        """Zenoh callback thread: take/release control (lease_queries.py); every query gets a reply."""
+    def answer_lease_query(self, query) -> None:
+        """Take/release control (lease_queries.py); every query gets a reply (caller holds `lock`)."""
         try:
             payload = query.payload.to_bytes() if query.payload is not None else b""
         except Exception:  # noqa: BLE001 — an unreadable payload is answered as an empty (refused) request
             payload = b""
-        with self.lock:
-            self.apply_commands()
-            reply = lease_queries.answer(payload, self.policy.lease, self.lease_guard, self.policy.rejections,
-                                         time.monotonic(), time.time())
+        reply = lease_queries.answer(payload, self.policy.lease, self.lease_guard, self.policy.rejections,
+                                     time.monotonic(), time.time())
         try:
             query.reply(keys.lease_key(self.robot_id), encode_message(reply))
         except Exception as exc:  # noqa: BLE001 — a vanished querier must not stop anything

@@ -87,15 +87,46 @@ def test_a_bad_payload_is_still_counted_as_rejected(daemon):
     assert daemon.policy.accepted == 0 and daemon.policy.rejected == 1
 
 
-def test_a_lease_query_is_answered_after_the_commands_that_arrived_before_it(daemon):
-    """Implicit lease: a command takes the free lease; the holder's release that follows must find it held."""
+LEASE_KEY = "sharedctl/v1/unit/control/lease"
+
+
+def test_a_lease_query_is_answered_by_the_loop_after_the_commands_that_arrived_before_it(daemon):
+    """Implicit lease: a command takes the free lease; the holder's release that follows must find it held.
+    The query waits in a channel (no Python callback thread takes the daemon's lock) until the loop polls."""
+    queries = daemon.session.subscriptions[LEASE_KEY]
+    assert isinstance(queries.handler, zenoh.handlers.FifoChannel)
     daemon.intake.queue(Sample(command(1)))
     request = encode_message(LeaseRequest(operator_id="op", session_id="s", seq=1, time=time.time(),
                                           action=LeaseAction.RELEASE))
     query = Query(request)
-    daemon.links.on_lease_query(query)
+    queries.samples.append(query)
+    assert not query.replies
+    with daemon.lock:
+        daemon.apply_commands()
     assert daemon.policy.accepted == 1 and not daemon.intake.pending
     assert query.replies[0].granted and daemon.policy.lease.holder_id is None
+
+
+def test_a_flood_of_commands_and_lease_queries_costs_each_poll_a_bounded_amount_of_work(daemon):
+    """Threat: a flood of commands (or of lease queries) held the daemon's lock while all of it was judged, and
+    the loop waited behind it (docs/security.md). Each poll now judges at most BUDGET commands and
+    LEASE_BUDGET queries; the rest wait, in order, for the next polls."""
+    from sharedctl.services.controller import zenoh_links
+
+    channel = daemon.session.subscriptions["sharedctl/v1/unit/operator/cmd"]
+    queries = daemon.session.subscriptions[LEASE_KEY]
+    channel.samples += [Sample(command(seq, operator_id=f"flood{seq}")) for seq in range(1, 501)]
+    floods = [Query(encode_message(LeaseRequest(operator_id=f"q{k}", session_id="s", seq=1, time=time.time(),
+                                                action=LeaseAction.TAKE))) for k in range(20)]
+    queries.samples += floods
+    with daemon.lock:
+        daemon.apply_commands()
+    assert not channel.samples and len(daemon.intake.pending) == 500 - command_intake.BUDGET
+    assert sum(1 for q in floods if q.replies) == zenoh_links.LEASE_BUDGET
+    for _ in range(40):
+        with daemon.lock:
+            daemon.apply_commands()
+    assert not daemon.intake.pending and all(len(q.replies) == 1 for q in floods)
 
 
 def test_a_full_queue_refuses_and_counts_the_overflow(daemon, monkeypatch):

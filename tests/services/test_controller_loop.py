@@ -60,7 +60,7 @@ class MemorySession:
     """declare_publisher / declare_subscriber / declare_queryable / liveliness().declare_token, kept in dicts."""
 
     def __init__(self):
-        self.publishers, self.callbacks, self.subscriptions = {}, {}, {}
+        self.publishers, self.subscriptions = {}, {}
 
     def declare_publisher(self, key):
         return self.publishers.setdefault(key, Publisher())
@@ -68,9 +68,8 @@ class MemorySession:
     def declare_subscriber(self, key, handler):
         return self.subscriptions.setdefault(key, Subscription(handler))
 
-    def declare_queryable(self, key, callback):
-        self.callbacks[key] = callback
-        return Publisher()
+    def declare_queryable(self, key, handler):
+        return self.subscriptions.setdefault(key, Subscription(handler))
 
     def liveliness(self):
         return self
