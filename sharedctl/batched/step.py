@@ -40,6 +40,7 @@ class StepKernel:
     def __init__(self, engine):
         self.e = engine
         self._reference = (None, None, None, None)
+        self._moved, self._share = np.zeros(0, dtype=np.intp), np.zeros(0)   # the governor's λ of this step (`govern`)
 
     def reference(self, wish):
         """(RowReference, reference_inside, wish_admissible) of `wish`; a wish that is the same object as
