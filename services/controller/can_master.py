@@ -27,6 +27,7 @@ decodes it or counts it as bad (tests/protocol/test_periodic_frames.py holds the
 """
 from __future__ import annotations
 
+import math
 import statistics
 import time
 from collections import Counter, deque
@@ -299,6 +300,20 @@ class CanMaster:
             if axis.estimate is None or axis.estimate.received <= since:
                 return False
         return True
+
+    def heard_idle_since(self, since: float | None) -> bool:
+        """True when every axis has sent, after `since` (clock time), a Heartbeat in a state other than
+        CLOSED_LOOP_CONTROL and an encoder estimate: disarmed, and with a reading to start from."""
+        return not self.not_idle(since)
+
+    def not_idle(self, since: float | None = None) -> list[int]:
+        """The axes not heard idle, with an encoder estimate, after `since` (None: ever)."""
+        since = -math.inf if since is None else since
+        return [
+            n for n, a in self.axes.items()
+            if a.heartbeat_at <= since or a.state is None or a.state is AxisState.CLOSED_LOOP_CONTROL
+            or a.estimate is None or a.estimate.received <= since
+        ]
 
     def faulted_axes(self) -> list[int]:
         """Axes that report an error or left closed loop (meaningful once armed)."""

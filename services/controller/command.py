@@ -8,7 +8,16 @@
                          [--[no-]sensor-sync] [--sensor-lead-us 250] [--sensor-wait-us T/4] [--spin-us 100]
                          [--torque-at-us 0] [--cpu N] [--[no-]predict] [--rtt-probe-rate 10]
                          [--lease implicit|explicit] [--lease-expiry-ms 1000] [--max-command-age-ms 500]
-                         [--max-clock-skew-ms MS] [--json OUT]
+                         [--max-clock-skew-ms MS] [--pose checkpoint|scenario] [--checkpoint FILE|none]
+                         [--checkpoint-max-age-s 60] [--json OUT]
+
+Start (resume.py): the controller first disarms every drive and hears each one idle. With `--pose
+checkpoint` (the default) a controller that follows one that failed resumes from its checkpoint (the
+pose carried forward over the wheel encoders' increments since) and keeps the drives disarmed until
+an operator takes control; with no checkpoint, or the last controller stopped on purpose, it starts
+at the scenario's pose — unless the drives report errors, which say a controller was driving them:
+then arming is refused, and why is said. `--pose scenario` declares the robot at the scenario's
+start pose (a first start, a re-homing).
 
 At exit it prints a summary line for people and, with `--json OUT`, writes the loop statistics'
 summary as JSON (loop_stats.py: units in the key names) — what another module reads.
@@ -18,6 +27,7 @@ from __future__ import annotations
 import argparse
 import os
 import sys
+from pathlib import Path
 
 from sharedctl.protocol.keys import check_robot_id
 from sharedctl.protocol.errors import KeyExprError
@@ -34,6 +44,8 @@ from .daemon_config import DaemonConfig
 from . import loop_stats
 from .priority import LEVELS, keep_off_cpu, make_loop_realtime, pin_to_cpu, raise_nice
 from .round_trip import DEFAULT_RATE
+from . import checkpoint as checkpoints
+from .resume import DEFAULT_MAX_AGE as CHECKPOINT_MAX_AGE, POSE_SOURCES
 from ..recording.launch import add_argument as add_record_argument, open_process_recording, summary_line
 
 MAX_PROBE_RATE = 50.0   # Hz: round-trip polls are a few frames a second, never a load on the bus
@@ -107,6 +119,17 @@ def add_parser(subparsers) -> None:
     p.add_argument("--max-clock-skew-ms", type=float,
                    help="drop operator messages whose |receive wall time - send_time| exceeds this (only for hosts "
                         "synchronised by chrony/PTP; default: no absolute bound)")
+    p.add_argument("--pose", choices=POSE_SOURCES, default="checkpoint",
+                   help="where the start pose comes from: checkpoint = resume from the checkpoint of a controller "
+                        "that failed (drives disarmed until an operator takes control), else the scenario's start "
+                        "pose if the drives report no errors (default); scenario = the robot stands at the "
+                        "scenario's start pose (first start, re-homing)")
+    p.add_argument("--checkpoint", metavar="FILE",
+                   help="the checkpoint file, written every 50 ms and at every Estop (default "
+                        "$SHAREDCTL_STATE_DIR, else $XDG_STATE_HOME/sharedctl, else ~/.local/state/sharedctl: "
+                        "controller-ROBOT.checkpoint); none: no checkpoint (a restart cannot resume)")
+    p.add_argument("--checkpoint-max-age-s", type=float, default=CHECKPOINT_MAX_AGE,
+                   help=f"an older checkpoint is not resumed from: arming is refused (default {CHECKPOINT_MAX_AGE:g})")
     p.add_argument("--json", metavar="OUT",
                    help="at exit, write the summary (ticks, missed deadlines, jitter, compute and CPU per period, CAN "
                         "frames, operator commands, …; loop_stats.py) as JSON to OUT")
@@ -134,13 +157,19 @@ def run(args) -> int:
         if not (args.lease_expiry_ms > 0 and args.max_command_age_ms > 0
                 and (args.max_clock_skew_ms is None or args.max_clock_skew_ms > 0)):
             raise ValueError("--lease-expiry-ms, --max-command-age-ms and --max-clock-skew-ms must be positive")
+        if not args.checkpoint_max_age_s > 0:
+            raise ValueError("--checkpoint-max-age-s must be positive")
+        checkpoint = (None if args.checkpoint == "none"
+                      else checkpoints.default_path(robot_id) if args.checkpoint is None else Path(args.checkpoint))
+        if checkpoint is not None:
+            checkpoint.parent.mkdir(parents=True, exist_ok=True)
         scenario = load(args.scenario)
         loop, q0, _ = scenario.closed_loop(args.controller)
         spec = can_bus.spec_from_args(args)
         connect = list(args.zenoh_connect or [])
         listen = list(args.zenoh_listen or ([] if connect or args.zenoh_config else [zenoh_session.DEFAULT_ENDPOINT]))
         zenoh_config.check_session_args(args.zenoh_config, listen, connect)   # validates before anything opens
-    except (ScenarioError, KeyExprError, ValueError) as exc:
+    except (ScenarioError, KeyExprError, ValueError, OSError) as exc:
         print(f"{PROG}: {exc}", file=sys.stderr)
         return 2
     config = DaemonConfig(
@@ -153,6 +182,7 @@ def run(args) -> int:
         lease_mode=args.lease, lease_expiry=args.lease_expiry_ms / 1e3,
         max_command_age=args.max_command_age_ms / 1e3,
         max_clock_skew=None if args.max_clock_skew_ms is None else args.max_clock_skew_ms / 1e3,
+        scenario=scenario.name, pose=args.pose, checkpoint=checkpoint, checkpoint_max_age=args.checkpoint_max_age_s,
     )
     bus = session = daemon = recording = None
     priority = raise_nice(args.priority)   # before Zenoh and CAN start their threads (they inherit it)
@@ -171,7 +201,8 @@ def run(args) -> int:
         print(
             f"{PROG}: robot {robot_id}, scenario {scenario.name}, controller {loop.controller.name}, "
             f"{config.rate:g} Hz (telemetry {config.telemetry_rate:g} Hz), torque limit {config.torque_limit:g} N·m, "
-            f"CAN {spec.describe()}, Zenoh {zenoh_desc}, priority {priority}"
+            f"CAN {spec.describe()}, Zenoh {zenoh_desc}, priority {priority}, pose from {args.pose} "
+            f"(checkpoint {checkpoint or 'none'})"
             f"{' + SCHED_FIFO loop' if daemon.realtime else ''}",
             flush=True,
         )

@@ -28,11 +28,19 @@ events when something changes (rate-limited), a Heartbeat message at 1 Hz and a 
 as long as the daemon runs. The loop's statistics are an observer beside it (loop_stats.py), notified
 at named points of each period; `run` returns its summary.
 
-Modes: ARMING (zero torque sent, waiting for CLOSED_LOOP heartbeats) → RUNNING → ESTOPPED.
-Estop (Estop frame to every axis, no more torque commands, latched) on: the operator's estop
-flag; wheel feedback older than `feedback_timeout` while running; an axis reporting an error
-or leaving closed loop; a non-finite command. An operator command with control_request
-"take" (and estop false) sent after the estop re-arms the axes.
+Modes: STARTING → ARMING (zero torque sent, waiting for CLOSED_LOOP heartbeats) → RUNNING → ESTOPPED,
+and HELD. A controller arms only drives it has disarmed itself in this life: STARTING sends IDLE
+to every axis (again every 0.1 s) until each has been heard idle, with its encoder reading; then
+resume.py decides the start — from the checkpoint of a controller that died (checkpoint.py: the
+pose carried forward by the odometry over the encoder increments since, HELD until an operator
+takes control, a latched Estop still latched), from the scenario's pose (a first start or a
+declared one: ARMING at once), or a refusal (HELD for good, and why). While running, the
+checkpoint is written every 50 ms and at every Estop, so the next controller can do the same.
+Estop (Estop frame to every axis, repeated every 0.5 s while latched, no more torque commands) on:
+the operator's estop flag; wheel feedback older than `feedback_timeout` while running; an axis
+reporting an error or leaving closed loop; a non-finite command. An operator command with
+control_request "take" (and estop false) sent after the estop — or after the hold began — arms
+the axes; a refused start arms never. HELD repeats IDLE every 0.5 s.
 
 Operator authority: a Zenoh queryable on `…/control/lease` answers take/release requests, polled
 by the loop like the commands (zenoh_links.py, lease_queries.py → lease.py); only the lease
@@ -55,6 +63,8 @@ from sharedctl.protocol.wire_types import Dims
 from sharedctl.shared_controller import HISTORY, NonFiniteCommand, SharedController
 
 from ..lifecycle import RateClock, poll_until
+from . import checkpoint as checkpoints
+from . import resume
 from .can_master import CanMaster
 from .daemon_config import DaemonConfig
 from .lease import OperatorLease
@@ -71,11 +81,15 @@ ROLE = "controller"
 RECEIVE_SLICE = 5e-4    # s: the loop takes and judges operator commands at least this often between ticks
 RECEIVE_MARGIN = 2e-4   # s: reading CAN frames stops this long before the clock's final spin (the rest: next tick)
 MAX_DELAY = 0.1         # s: the largest delay predicted over (a longer one is cut to it; see `prediction_delay`)
+REPEAT_INTERVAL = 0.5   # s: a latched Estop's frames, and a hold's IDLE, are sent again this often
+STARTING_REPEAT = 0.1   # s: IDLE sent again this often until every axis has been heard idle
 
 
 class Mode(enum.Enum):
+    STARTING = "starting"   # IDLE sent to every axis; waiting to hear each one idle (module doc)
     ARMING = "arming"
     RUNNING = "running"
+    HELD = "held"           # disarmed until an operator takes control; for good when the start was refused
     ESTOPPED = "estopped"
 
 
@@ -91,6 +105,7 @@ class ControllerDaemon:
         self.controller = SharedController(loop.model, loop.feasible, loop.controller, loop.sharing, loop.reference,
                                            loop.backup)
         self.output_feedback = loop.controller.observer is not None
+        self.q0, self.theta_hat0 = tuple(float(x) for x in q0), loop.theta_hat0
         self.state = self.controller.initial_state(q0, loop.theta_hat0)
         self.dims = Dims(dof=self.model.n, n_theta=self.model.n_theta, n_wheels=3)
         self.odometry = WheelOdometry(self.model, q0)
@@ -105,7 +120,18 @@ class ControllerDaemon:
         self.links = ControllerLinks(session, config.robot_id, ROLE, self.policy, self.lease_guard, self.lock,
                                      EventLimiter(config.event_interval, ROLE), config.verbose)   # zenoh_links.py
         self.intake, self.apply_commands, self.emit = self.links.intake, self.links.apply_commands, self.links.emit
-        self.mode = Mode.ARMING
+        self.mode = Mode.STARTING
+        self.start_requested_at: float | None = None   # master clock: when IDLE went to every axis (`begin`)
+        self.start_text = ""                            # what `resume.decide` decided
+        self.refusal: str | None = None                 # set: arming is refused for this controller's life
+        self.estop_reason = ""
+        self.hold_take_mark = 0
+        self.last_repeat_at = -math.inf
+        self.saved = self._read_checkpoint()            # the previous controller's checkpoint (or why not)
+        self.checkpoints = (checkpoints.CheckpointWriter(config.checkpoint, config.checkpoint_interval)
+                            if config.checkpoint is not None else None)
+        self.boot_id = checkpoints.host_boot_id()
+        self.checkpoint_failures_seen = 0
         self.period = 1.0 / config.rate
         self.max_delay = min(MAX_DELAY, HISTORY * self.period)   # the predictor keeps HISTORY periods of commands
         self.delay = 0.0                                         # s, the last `delay` passed to the step
@@ -148,7 +174,8 @@ class ControllerDaemon:
         self.master.receive_until(0.0)    # the frames queued since the bus opened: not the first period's work
         clock = RateClock(self.period, spin=config.spin)
         t0 = stats.start()
-        self.master.request_arming()
+        self.begin()
+        ended = False      # stopped on purpose (stop flag, duration): the last checkpoint says so
         try:
             while not stop.stopped:
                 reached, due, missed_before = time.monotonic(), clock.next, clock.missed
@@ -163,21 +190,25 @@ class ControllerDaemon:
                     break
                 self.tick(now)                    # read → step → write: the torque frames
                 self.telemetry.publish_due(now)   # then the RobotState stage and the Heartbeat that are due
+                self.save_checkpoint(now)         # when one is due
                 stats.tick_done(now)
                 self.master.probe_round_trip()    # the round-trip poll, if one is due: one frame, never a wait
                 if self.phase_lock is not None and (arrival := estimates_arrival(self.master.estimates())) is not None:
                     clock.next += self.phase_lock.correction(clock.next, arrival)
                 self.receive_until(clock.next - config.spin - RECEIVE_MARGIN)
                 stats.period_end()
+            ended = True
         finally:
-            self.shutdown()
+            self.shutdown(ended)
         return stats.summary(clock.missed, {
             "frames_rx": self.master.rx_frames, "frames_tx": self.master.tx_frames,
             "bad_frames": self.master.bad_frame_count,
             "implausible_estimates": sum(self.master.implausible_estimates.values()),
             "commands_accepted": self.policy.accepted, "rejections": dict(self.policy.rejections),
             "can_round_trip_ms": self.master.round_trip * 1e3, "rtt_probes": self.master.probe.counts(),
-            "mode": self.mode.value})
+            "mode": self.mode.value, "start": self.start_text, "arming_refused": self.refusal,
+            "checkpoints_written": 0 if self.checkpoints is None else self.checkpoints.written,
+            "checkpoint_failures": 0 if self.checkpoints is None else self.checkpoints.failures})
 
     def warm_up(self) -> None:
         """One control step and one RobotState built and encoded, all discarded, before the clock starts.
@@ -267,9 +298,30 @@ class ControllerDaemon:
     def step(self, now: float, operator):
         """The mode logic (module doc); while RUNNING, the control step. Returns the wheel torques to write,
         None if there are none: an estop sends its Estop frames at once, arming its zero torques."""
-        if self.status.estop_requested and self.mode is not Mode.ESTOPPED:
+        if self.status.estop_requested and self.mode not in (Mode.ESTOPPED, Mode.STARTING):
             self.estop(now, "estop requested by the operator")
-        if self.mode is Mode.ARMING:
+        if self.mode is Mode.STARTING:
+            self.u_s, self.tau = np.zeros(self.model.n), np.zeros(3)
+            if self.master.heard_idle_since(self.start_requested_at):
+                self.start(now)
+            elif now - self.last_repeat_at >= STARTING_REPEAT:
+                self.master.idle_all()
+                self.last_repeat_at = now
+                waiting = self.master.not_idle(self.start_requested_at)
+                self.emit(now, "starting", "info", "info", "starting: waiting to hear every axis idle, with its "
+                                                           f"encoder reading (silent or armed: {waiting})")
+        elif self.mode is Mode.HELD:
+            self.u_s, self.tau = np.zeros(self.model.n), np.zeros(3)
+            if now - self.last_repeat_at >= REPEAT_INTERVAL:
+                self.master.idle_all()
+                self.last_repeat_at = now
+            if self.operator_took(self.hold_take_mark):
+                self.hold_take_mark = self.take_requests
+                if self.refusal is None:
+                    self.rearm(now, "armed by the operator's take after the start")
+                else:
+                    self.emit(now, "refused", "fault", "critical", self.refusal)
+        elif self.mode is Mode.ARMING:
             self.u_s, self.tau = np.zeros(self.model.n), np.zeros(3)
             self.master.send_torques(self.tau)   # feeds the watchdogs as soon as an axis closes its loop
             if self.master.arming_done(now):
@@ -286,20 +338,106 @@ class ControllerDaemon:
                 return self.control(now, operator)
         elif self.mode is Mode.ESTOPPED:
             self.u_s, self.tau = np.zeros(self.model.n), np.zeros(3)
-            if (
-                self.take_requests > self.estop_take_mark and self.current_command is not None
-                and not self.current_command.estop
-                and self.feedback_age <= self.config.feedback_timeout
-            ):
+            if now - self.last_repeat_at >= REPEAT_INTERVAL:
+                self.master.estop_all()          # a drive that missed the first (or restarted since) gets it again
+                self.last_repeat_at = now
+            if self.operator_took(self.estop_take_mark):
+                self.estop_take_mark = self.take_requests
+                if self.refusal is not None:
+                    self.emit(now, "refused", "fault", "critical", self.refusal)
+                    return None
                 with self.lock:
                     self.policy.clear_estop()
-                self.state = self.controller.initial_state(self.q, self.state.theta_hat)
-                self.master.reset_arming()
-                self.master.request_arming()
-                self.mode = Mode.ARMING
-                self.emit(now, "estop_cleared", "estop_cleared", "info",
-                          "estop cleared by the operator (take): re-arming")
+                self.estop_reason = ""
+                self.rearm(now, "estop cleared by the operator (take): re-arming", "estop_cleared")
         return None
+
+    def operator_took(self, mark: int) -> bool:
+        """An in-band take (estop false) since `mark`, with fresh wheel feedback."""
+        return (self.take_requests > mark and self.current_command is not None and not self.current_command.estop
+                and self.feedback_age <= self.config.feedback_timeout)
+
+    def rearm(self, now: float, text: str, kind: str = "info") -> None:
+        self.state = self.controller.initial_state(self.q, self.state.theta_hat)
+        self.master.reset_arming()
+        self.master.request_arming()
+        self.mode = Mode.ARMING
+        self.emit(now, f"rearm:{kind}", kind, "info", text)
+
+    # ------------------------------------------------------------------ start
+    def _read_checkpoint(self):
+        if self.config.checkpoint is None:
+            return None
+        try:
+            return checkpoints.read(self.config.checkpoint)
+        except checkpoints.CheckpointError as exc:
+            return exc
+
+    def begin(self) -> None:
+        """IDLE to every axis: the start (STARTING) waits to hear each one idle before anything else."""
+        self.master.idle_all()
+        self.start_requested_at = self.master.clock()
+        self.mode = Mode.STARTING
+
+    def start(self, now: float) -> None:
+        """Every axis heard idle since `begin`: where the robot is and what may follow (resume.py)."""
+        estimates = self.master.estimates()
+        saved = self.saved
+        age = (saved.age(time.time(), time.monotonic(), self.boot_id)
+               if isinstance(saved, checkpoints.Checkpoint) else None)
+        decision = resume.decide(
+            self.config.pose, saved, robot_id=self.config.robot_id, scenario=self.config.scenario, q0=self.q0,
+            turns=[e.pos_turns for e in estimates], errors=[self.master.axes[n].error for n in self.master.nodes],
+            age=age, max_age=self.config.checkpoint_max_age)
+        self.odometry.resume(decision.q, decision.wheel_turns)
+        self.q, self.v = self.odometry.update(estimates)
+        theta = decision.theta_hat
+        if theta is None or len(theta) != self.model.n_theta:
+            theta = self.theta_hat0
+        self.state = self.controller.initial_state(self.q, theta)
+        self.start_text = decision.text
+        self.hold_take_mark = self.estop_take_mark = self.take_requests
+        self.last_repeat_at = -math.inf
+        self.emit(now, "start", "info", "critical" if decision.action == "refuse" else "info",
+                  f"{decision.text}; pose ({', '.join(f'{x:.3f}' for x in self.q)})")
+        self.refusal = decision.text if decision.action == "refuse" else None
+        if decision.action == "arm" and not self.status.estop_requested:
+            self.master.reset_arming()
+            self.master.request_arming()
+            self.mode = Mode.ARMING
+        elif decision.action == "estop" or self.status.estop_requested:
+            reason = (saved.reason if isinstance(saved, checkpoints.Checkpoint) and saved.estop
+                      else "estop requested by the operator" if self.status.estop_requested
+                      else "a drive reports an Estop")
+            self.estop(now, f"latched at start: {reason}")
+        else:
+            self.mode = Mode.HELD
+
+    def save_checkpoint(self, now: float, force: bool = False, ended: bool = False) -> None:
+        """The checkpoint (checkpoint.py), when due or forced; never before the start is decided, nor after a
+        refused one (its pose is no evidence)."""
+        writer = self.checkpoints
+        if writer is None or self.mode is Mode.STARTING or self.refusal is not None:
+            return
+        if not (force or writer.due(now)):
+            return
+        baseline = self.odometry.baseline()
+        if baseline is None:
+            return
+        q, turns = baseline
+        saved = checkpoints.Checkpoint(
+            robot_id=self.config.robot_id, scenario=self.config.scenario, q=tuple(q), wheel_turns=tuple(turns),
+            theta_hat=tuple(float(x) for x in self.state.theta_hat), estop=self.mode is Mode.ESTOPPED,
+            reason=self.estop_reason, wall=time.time(), monotonic=time.monotonic(), boot_id=self.boot_id,
+            seq=writer.written + 1, ended=ended)
+        if ended:
+            writer.close(saved)             # the last one, written before the process exits
+        else:
+            writer.offer(saved, now)        # written by the writer's thread
+        if writer.failures > self.checkpoint_failures_seen:
+            self.checkpoint_failures_seen = writer.failures
+            self.emit(now, "checkpoint", "fault", "error", f"checkpoint not written to {writer.path}: "
+                                                           f"{writer.last_error} (a restart cannot resume)")
 
     def control(self, now: float, operator):
         """`SharedController.step`, τ = B(ψ)⁻¹u_s scaled down uniformly to the torque limit; None (and zero
@@ -348,12 +486,15 @@ class ControllerDaemon:
 
     def estop(self, now: float, reason: str) -> None:
         self.master.estop_all()
+        self.last_repeat_at = now
         self.tau, self.u_s = np.zeros(3), np.zeros(self.model.n)
         self.mode = Mode.ESTOPPED
+        self.estop_reason = reason
         self.stats.estop()
         with self.lock:
             self.estop_take_mark = self.policy.take_requests
         self.emit(now, f"estop:{reason[:12]}", "estop", "critical", f"ESTOP: {reason}")
+        self.save_checkpoint(now, force=True)      # the latch outlives this process
 
     # ------------------------------------------------------------------ write
     def write(self, now: float, tau) -> None:
@@ -392,14 +533,18 @@ class ControllerDaemon:
         wall = time.time()
         since = None if self.lease_since is None else self.lease_since + (wall - time.monotonic())   # wall clock
         return (self.state_seq, wall, self.q, v_used, out, self.loop.feasible, self.loop.sharing.bands,
-                self.tau, self.u_s, self.mode is Mode.ESTOPPED, self.lease_holder, link,
+                self.tau, self.u_s, self.mode in (Mode.ESTOPPED, Mode.HELD), self.lease_holder, link,
                 out.theta_estimate if out is not None else self.state.theta_hat, since)
 
     # --------------------------------------------------------------- shutdown
-    def shutdown(self) -> None:
-        """Zero torque, then IDLE to every axis (twice: a lost frame must not leave an axis armed)."""
+    def shutdown(self, ended: bool = True) -> None:
+        """Zero torque, then IDLE to every axis (twice: a lost frame must not leave an axis armed); the last
+        checkpoint, `ended` when the stop was on purpose (a controller that failed is resumed from it)."""
         self.tau, self.u_s = np.zeros(3), np.zeros(self.model.n)
         for _ in range(2):
             self.master.send_torques(self.tau)
             self.master.idle_all()
+        self.save_checkpoint(time.monotonic(), force=True, ended=ended)
+        if self.checkpoints is not None:
+            self.checkpoints.close()        # a failed controller's last offer written too
         self.emit(time.monotonic(), "shutdown", "info", "info", "controller stopping: zero torque, axes IDLE")

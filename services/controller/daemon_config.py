@@ -2,9 +2,13 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
+from pathlib import Path
+
+from .checkpoint import DEFAULT_INTERVAL as CHECKPOINT_INTERVAL
 
 from .lease import DEFAULT_EXPIRY, LeaseMode
 from .replay_guard import DEFAULT_MAX_AGE
+from .resume import DEFAULT_MAX_AGE as CHECKPOINT_MAX_AGE
 from .round_trip import DEFAULT_RATE
 
 
@@ -32,3 +36,8 @@ class DaemonConfig:
     lease_expiry: float = DEFAULT_EXPIRY  # s without commands/takes from the holder → lease free
     max_command_age: float = DEFAULT_MAX_AGE  # s later than the session's best delivery → stale (replay_guard.py)
     max_clock_skew: float | None = None   # s, |receive wall − send_time| bound; None: hosts not synchronised
+    scenario: str = ""                  # the scenario's name (a checkpoint is resumed only by the same scenario)
+    pose: str = "checkpoint"            # where the start pose comes from (resume.py): "checkpoint" | "scenario"
+    checkpoint: Path | None = None      # the checkpoint file (checkpoint.py); None: none written or read
+    checkpoint_interval: float = CHECKPOINT_INTERVAL  # s between checkpoints while running
+    checkpoint_max_age: float = CHECKPOINT_MAX_AGE    # s: an older checkpoint is not resumed from

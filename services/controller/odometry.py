@@ -85,7 +85,7 @@ class WheelOdometry:
             if self.source == "position":
                 q = self._integrate_angles(q, [TWO_PI * (p - p0) for p, p0 in zip(pos, last)])
             else:
-                dt = max(newest - self._last_time, 0.0)
+                dt = 0.0 if self._last_time is None else max(newest - self._last_time, 0.0)
                 q = [qi + 0.5 * dt * (vi + wi) for qi, vi, wi in zip(q, self.v.tolist(), v_new)]
             v_new = self.wheel_map.body_velocity(q, omega)
             self.q = np.array(q)
@@ -93,6 +93,19 @@ class WheelOdometry:
         self.v = np.array(v_new)
         self.updates += 1
         return self.q.copy(), self.v.copy()
+
+    def resume(self, q, turns) -> None:
+        """Continue from pose `q`, known to belong to the encoder readings `turns` (a checkpoint's pair, or the
+        readings when the pose was declared): the next `update` integrates the increments from `turns` on."""
+        self.q = np.asarray(q, dtype=float).copy()
+        self.v = np.zeros_like(self.q)
+        self._last_pos = [float(t) for t in turns]
+
+    def baseline(self) -> tuple[list, list] | None:
+        """(q, turns): the pose and the encoder readings it was integrated up to (None before any update)."""
+        if self._last_pos is None:
+            return None
+        return self.q.tolist(), list(self._last_pos)
 
     def _integrate_angles(self, q: list, d_phi: list) -> list:
         """Δq = B(ψ_mid)⁻ᵀ Δφ: one predictor pass for the yaw, then the midpoint."""

@@ -140,10 +140,14 @@ def run(args) -> int:
         console_argv += ["--zenoh-connect", recording.endpoint] if recording is not None and not secure.enabled else []
         children["console"] = start_child("console", console_argv + ([] if interactive else ["--headless"]), log_dir,
                                           interactive=interactive)
+        # the robot is a fresh simulation standing at the scenario's start pose: the first controller is told so;
+        # a restarted one (controller.restart_at) resumes from the checkpoint its predecessor left in the log folder
         controller_argv = ["controller", "--scenario", scenario_arg, *law,
                            *secure.zenoh_args("controller", ["--zenoh-listen", controller_ep]),
-                           *can_controller, *common, "--duration", backstop]
-        children["controller"] = start_child("controller", controller_argv + _json("controller", log_dir), log_dir)
+                           *can_controller, *common, "--duration", backstop,
+                           "--checkpoint", str(log_dir / "controller.checkpoint")]
+        children["controller"] = start_child("controller", controller_argv + ["--pose", "scenario"]
+                                             + _json("controller", log_dir), log_dir)
         if not secure.wait_up("controller", args.robot_id, children["controller"], STARTUP_TIMEOUT,
                               lambda: wait_listening(controller_ep, children["controller"], STARTUP_TIMEOUT)):
             raise RuntimeError(f"controller did not come up on {controller_ep}")

@@ -19,8 +19,9 @@ def mounts(service: dict) -> dict[str, str]:
 
 
 def host_path(host: str) -> Path | None:
-    """A relative bind source is relative to deploy/ (the compose file's folder); absolute ones are the site's."""
-    return None if host.startswith("/") else (DEPLOY / host).resolve()
+    """A relative bind source is relative to deploy/ (the compose file's folder); absolute ones are the site's,
+    and a bare name is a named volume."""
+    return (DEPLOY / host).resolve() if host.startswith(".") else None
 
 
 def test_the_services_are_the_documented_ones():
@@ -116,6 +117,17 @@ def test_long_running_services_restart_and_stop_by_sigterm():
         assert services[name]["restart"] == "unless-stopped", name
     for name in SHAREDCTL_SERVICES:
         assert services[name]["stop_signal"] == "SIGTERM"
+
+
+def test_the_controllers_checkpoint_is_on_a_named_volume_kept_across_restarts():
+    """The settings file's checkpoint lies in a folder the read-only controller container can write and that
+    outlives the container (a restarted controller resumes from it)."""
+    import tomllib
+    document = compose()
+    folder = str(Path(tomllib.loads((DEPLOY / "config" / "controller.toml").read_text())["checkpoint"]).parent)
+    assert mounts(document["services"]["controller"])[folder] == "controller-state"
+    assert "controller-state" in document["volumes"]
+    assert f"-m 0750 {folder}" in (DEPLOY / "Dockerfile").read_text()      # owned by the image's user
 
 
 def test_every_relative_mount_exists_in_the_repository():

@@ -126,3 +126,13 @@ def test_the_controllers_syscall_filter_allows_its_priority_calls():
 def test_a_filtered_call_fails_with_eperm_instead_of_killing_the_service():
     for unit in UNITS:
         assert unit_keys(unit)["SystemCallErrorNumber"] == "EPERM", unit.name
+
+
+def test_the_controllers_checkpoint_folder_is_its_writable_state_directory():
+    """ProtectSystem=strict makes the system read-only; the unit's StateDirectory (/var/lib/sharedctl) is the
+    one folder it writes, and the settings file keeps the checkpoint there."""
+    import tomllib
+    keys = unit_keys(next(u for u in UNITS if u.name == "sharedctl-controller.service"))
+    checkpoint = Path(tomllib.loads((DEPLOY / "config" / "controller.toml").read_text())["checkpoint"])
+    assert checkpoint.parent == Path("/var/lib") / keys["StateDirectory"]
+    assert "pose" not in tomllib.loads((DEPLOY / "config" / "controller.toml").read_text())

@@ -210,8 +210,10 @@ def test_daemon_arms_the_axes_in_torque_passthrough_and_sends_torques_every_peri
     armed_at = time.monotonic()
     for n in NODES:
         assert robot.mode[n] == (ControlMode.TORQUE_CONTROL, InputMode.PASSTHROUGH)
-        clear, closed = robot.frames(cs.ClearErrors, n), robot.frames(cs.SetAxisState, n)
-        assert clear and closed and clear[0][0] <= closed[0][0]
+        clear, states = robot.frames(cs.ClearErrors, n), robot.frames(cs.SetAxisState, n)
+        closed = [(t, f) for t, f in states if f.requested_state is AxisState.CLOSED_LOOP_CONTROL]
+        assert states[0][1].requested_state is AxisState.IDLE      # disarmed first: it arms only what it disarmed
+        assert clear and closed and states[0][0] <= clear[0][0] <= closed[0][0]
     time.sleep(0.5)
     for n in NODES:
         torques = robot.frames(cs.SetInputTorque, n, since=armed_at)

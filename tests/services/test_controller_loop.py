@@ -89,7 +89,16 @@ def make_daemon():
     d = ControllerDaemon(DaemonConfig(robot_id="unit", verbose=False), loop, q0, MemoryBus(), MemorySession())
     d.master.clock = lambda: d.clock_now
     d.clock_now = 10.0
+    start(d)
     return d
+
+
+def start(d, now=10.0, state=AxisState.IDLE, error=ODriveError.NONE):
+    """The start-up: IDLE to every axis, the axes heard idle, the start decided (a first start: ARMING)."""
+    d.begin()
+    feed(d, now + 0.0005, state=state, error=error)
+    d.tick(now + 0.0006)
+    d.master.bus.take()
 
 
 @pytest.fixture
@@ -349,6 +358,7 @@ def test_no_wait_when_the_estimates_are_there_or_the_drives_send_slower_than_the
                             *load("paper_convex").closed_loop("ce")[:2], MemoryBus(), MemorySession())
     slow.master.clock = lambda: slow.clock_now
     slow.clock_now = 10.0
+    start(slow)
     running_with_drives_every(slow, 2 * slow.period)   # 500 Hz drives, 1 kHz loop: every other tick has none
     slow.await_estimates()
     assert slow.stats.sensor_waits == 0 and slow.clock_now == 10.0
@@ -356,6 +366,7 @@ def test_no_wait_when_the_estimates_are_there_or_the_drives_send_slower_than_the
                             *load("paper_convex").closed_loop("ce")[:2], MemoryBus(), MemorySession())
     free.master.clock = lambda: free.clock_now
     free.clock_now = 10.0
+    start(free)
     running_with_drives_every(free, PERIOD)
     free.await_estimates()
     assert free.stats.sensor_waits == 0 and free.clock_now == 10.0
@@ -480,8 +491,9 @@ def test_the_frames_queued_before_the_clock_and_the_first_heartbeat_are_not_the_
     daemon.master.bus.recv = recv
     daemon.master.clock = time.monotonic
     daemon.config.duration = 0.03
+    before = daemon.master.rx_frames            # the start-up's frames (`start`)
     summary = daemon.run(Stop())
-    assert summary["ticks"] > 0 and daemon.master.rx_frames == 40
+    assert summary["ticks"] > 0 and daemon.master.rx_frames == before + 40
     assert read_at == [None] * 40
     assert put_at == [None]                           # one heartbeat a second: the first went out before the clock
 
@@ -497,8 +509,10 @@ def test_the_loops_summary_holds_every_figure_the_bench_reports_and_is_strict_js
 
     daemon.master.clock = time.monotonic
     daemon.config.duration = 0.03
+    before = daemon.master.rx_frames            # the start-up's frames (`start`)
     summary = daemon.run(Stop())
     write_json(tmp_path / "controller.json", summary)
     figures = daemon_summary(tmp_path / "controller.json")
     assert [key for key in DAEMON_KEYS if figures[key] is None] == []
-    assert figures["ticks"] == summary["ticks"] > 0 and figures["frames_rx"] == 0 and summary["mode"] == "arming"
+    assert figures["ticks"] == summary["ticks"] > 0 and figures["frames_rx"] == before
+    assert summary["mode"] == "starting"     # run() disarms first; no drive answers here

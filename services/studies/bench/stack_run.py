@@ -227,6 +227,7 @@ def _run(rate_hz: float, seconds: float, log_dir: Path | None, probes: bool, con
                 "controller", "--scenario", SCENARIO, *can_args, "--zenoh-listen", z_ctrl, "--zenoh-connect", z_bench,
                 "--robot-id", ROBOT_ID, "--rate", f"{rate_hz:g}", "--duration", f"{daemon_seconds:.1f}", "--quiet",
                 "--sensor-lead-us", f"{SENSOR_LEAD_US:g}", "--json", str(summary_path), *controller_cpu,
+                "--pose", "scenario", "--checkpoint", str(log_dir / f"{name}.checkpoint"),
                 *controller_args], log_dir)
             started.append(controller)
             daemon_turns.append(_daemon_turn(controller, z_ctrl, robot, operator, per_turn, summary_path))
