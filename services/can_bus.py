@@ -120,10 +120,9 @@ def _enlarge_receive_buffer(bus: can.BusABC) -> None:
         enlarge_receive_buffer(sock)
 
 
-def add_arguments(parser) -> None:
-    """The CAN options every CAN-speaking command takes."""
-    parser.add_argument("--can-interface",
-                        help="python-can interface (default: socketcan if vcan0 exists, else udp_multicast)")
+def add_arguments(parser, default: str = "socketcan if vcan0 exists, else udp_multicast") -> None:
+    """The CAN options every CAN-speaking command takes (`default`: what the command does without them)."""
+    parser.add_argument("--can-interface", help=f"python-can interface (default: {default})")
     parser.add_argument("--can-channel", help="channel (default: vcan0, or the multicast group for udp_multicast)")
     parser.add_argument("--can-option", action="append", metavar="KEY=VALUE", help="extra can.Bus option (repeatable)")
 

@@ -12,8 +12,15 @@
   Get_Bus_Voltage_Current (RTR) at `probe_rate`, and the reply's arrival gives the CAN round trip
   (round_trip.py: the largest of the last 20; `round_trip`, NaN until measured). One frame out and
   one back per probe (10 Hz by default); sending one never waits for its reply.
-* Receive path: the frames this side sends (Set_*, Estop, Clear_Errors, RTR polls) come back
-  on udp_multicast and are ignored; a frame the codec refuses is counted and skipped.
+* Receive path: a frame the codec refuses is counted and skipped. A frame of the host's direction
+  that commands a drive (Set_*, Estop, Clear_Errors; RTR polls only read) is either the echo of
+  one this side sent — udp_multicast hands a socket its own frames back; SocketCAN does not — or
+  another master's. Each frame sent is remembered, in order, with its wall time: an arrival that
+  matches one sent less than `ECHO_WINDOW` before it (kernel receive time) is its echo and
+  consumes it; anything else is **foreign** — counted by id (`foreign`), an Event naming the
+  node, the command and the id, and `foreign_commands` for the daemon, which Estops. Nothing on
+  CAN authenticates a sender: this detects a second master, a replayed capture or an intruder
+  whose frames differ from this side's; it cannot stop one (docs/security.md).
 * Frames go through a transport (services/can_transport/): on udp_multicast a socket of its own
   speaking python-can's datagrams, without python-can's per-frame `Message`; a python-can bus
   given here (or a stand-in with its `send`/`recv`) is wrapped in the generic transport.
@@ -46,6 +53,8 @@ from .odometry import AxisEstimate
 from .round_trip import DEFAULT_RATE, PROBE_COMMAND, RoundTripProbe
 
 PROBE_REPLY = cs.CLASS_BY_CMD[int(PROBE_COMMAND)]   # the Get_* frame a round-trip poll is answered with
+ECHO_WINDOW = 0.25       # s: an echo arrives within this of its frame's send (loopback: microseconds)
+SENT_REMEMBERED = 8192   # frames sent kept for echo matching (≈ 5 s of this side's frames)
 ESTIMATE_INTERVALS = 9   # intervals between one axis's encoder frames kept for `estimate_interval`
 HOST_FRAMES = (
     cs.Estop, cs.SetAxisState, cs.SetControllerMode, cs.SetInputVel, cs.SetInputTorque, cs.SetLimits,
@@ -96,12 +105,16 @@ class CanMaster:
     events: list = field(default_factory=list)
     fast_paths: bool = True                      # the per-period frames through cansimple's entry points
     probe_rate: float = DEFAULT_RATE             # Hz, round-trip polls (0: none)
+    foreign: Counter = field(default_factory=Counter)   # drive commands this side did not send, by arbitration id
+    foreign_commands: int = 0
+    last_foreign: str = ""                       # the last one, named
 
     def __post_init__(self) -> None:
         self.axes = {n: AxisStatus(n) for n in self.nodes}
         self.probe = RoundTripProbe(tuple(self.nodes), self.probe_rate)
         self.transport = transport_for(self.bus)
         self._node_ids = frozenset(self.nodes)
+        self._sent: deque = deque(maxlen=SENT_REMEMBERED)   # (wall time, arbitration id, data) of frames sent
 
     def use_bus(self, bus) -> None:
         """Read and write another bus from now on."""
@@ -119,6 +132,8 @@ class CanMaster:
             self.tx_errors[type(exc).__name__] += 1
             return False
         self.tx_frames += 1
+        if not remote:
+            self._sent.append((self.wall_clock(), arbitration_id, data))
         return True
 
     def request_arming(self) -> None:
@@ -209,7 +224,7 @@ class CanMaster:
                 continue
             count += 1
             self._handle(frame.arbitration_id, frame.is_remote, frame.is_extended, frame.dlc, frame.data,
-                         self.arrival_time(frame.arrival))
+                         self.arrival_time(frame.arrival), frame.arrival)
             if stop_when is not None and stop_when():
                 return count
         return count
@@ -225,13 +240,15 @@ class CanMaster:
         """One received python-can message, arrived at `now` (clock time)."""
         self._handle(msg.arbitration_id, msg.is_remote_frame, msg.is_extended_id, msg.dlc, bytes(msg.data), now)
 
-    def _handle(self, arbitration_id: int, remote: bool, extended: bool, dlc: int, data: bytes, now: float) -> None:
-        """One received frame: decode, ignore our own direction, update the axes."""
+    def _handle(self, arbitration_id: int, remote: bool, extended: bool, dlc: int, data: bytes, now: float,
+                stamp: float | None = None) -> None:
+        """One received frame (arrived at `now`, clock time; `stamp`, the interface's wall-clock receive time):
+        decode; our own echoes are consumed, another master's commands reported; update the axes."""
         self.rx_frames += 1
         if self.fast_paths:
             kind = cs.periodic_kind(arbitration_id, dlc, data, remote, extended, self._node_ids)
             if kind is cs.SetInputTorque:
-                self.echoes_ignored += 1
+                self._host_frame(arbitration_id, data, stamp, kind)
                 return
             if kind is cs.GetEncoderEstimates:
                 pos, vel = cs.encoder_estimates(data)
@@ -246,7 +263,10 @@ class CanMaster:
             self.bad_frames[f"unexpected_{type(exc).__name__}"] += 1
             return
         if isinstance(frame, HOST_FRAMES):
-            self.echoes_ignored += 1
+            if remote or isinstance(frame, cs.PollRequest):
+                self.echoes_ignored += 1         # a poll reads; whoever sent it commands nothing
+            else:
+                self._host_frame(arbitration_id, data, stamp, type(frame))
             return
         axis = self.axes[frame.node_id]
         if isinstance(frame, cs.GetEncoderEstimates):
@@ -255,6 +275,26 @@ class CanMaster:
             self._heartbeat(axis, frame, now)
         elif type(frame) is PROBE_REPLY:
             self.probe.reply(frame.node_id, now)
+
+    def _host_frame(self, arbitration_id: int, data: bytes, stamp: float | None, kind) -> None:
+        """A drive command on the bus: the echo of one we sent (consumed, with any older ones whose echo never
+        came), or another master's."""
+        at = self.wall_clock() if stamp is None else stamp
+        sent = self._sent
+        while sent and sent[0][0] < at - ECHO_WINDOW:
+            sent.popleft()                       # its echo never came (SocketCAN sends none)
+        for i, (_, sent_id, sent_data) in enumerate(sent):
+            if sent_id == arbitration_id and sent_data == data:
+                for _ in range(i + 1):
+                    sent.popleft()
+                self.echoes_ignored += 1
+                return
+        self.foreign[arbitration_id] += 1
+        self.foreign_commands += 1
+        self.last_foreign = (f"{kind.__name__} to node {arbitration_id >> 5} (id 0x{arbitration_id:03X}), "
+                             "not sent by this controller")
+        if self.foreign[arbitration_id] == 1:
+            self.events.append(CanEvent("fault", "critical", f"foreign CAN master: {self.last_foreign}"))
 
     def _encoder(self, axis: AxisStatus, pos: float, vel: float, now: float) -> None:
         if axis.estimate_frame_at is not None and now > axis.estimate_frame_at:

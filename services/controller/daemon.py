@@ -83,6 +83,7 @@ RECEIVE_MARGIN = 2e-4   # s: reading CAN frames stops this long before the clock
 MAX_DELAY = 0.1         # s: the largest delay predicted over (a longer one is cut to it; see `prediction_delay`)
 REPEAT_INTERVAL = 0.5   # s: a latched Estop's frames, and a hold's IDLE, are sent again this often
 STARTING_REPEAT = 0.1   # s: IDLE sent again this often until every axis has been heard idle
+FOREIGN_REPEAT = 0.005  # s: while another master's commands keep coming, the Estop is sent again this often
 
 
 class Mode(enum.Enum):
@@ -132,6 +133,7 @@ class ControllerDaemon:
                             if config.checkpoint is not None else None)
         self.boot_id = checkpoints.host_boot_id()
         self.checkpoint_failures_seen = 0
+        self.foreign_seen = 0                           # the CAN master's foreign_commands already acted on
         self.period = 1.0 / config.rate
         self.max_delay = min(MAX_DELAY, HISTORY * self.period)   # the predictor keeps HISTORY periods of commands
         self.delay = 0.0                                         # s, the last `delay` passed to the step
@@ -202,6 +204,8 @@ class ControllerDaemon:
             self.shutdown(ended)
         return stats.summary(clock.missed, {
             "frames_rx": self.master.rx_frames, "frames_tx": self.master.tx_frames,
+            "foreign_commands": self.master.foreign_commands,
+            "foreign_by_id": {f"0x{i:03X}": n for i, n in sorted(self.master.foreign.items())},
             "bad_frames": self.master.bad_frame_count,
             "implausible_estimates": sum(self.master.implausible_estimates.values()),
             "commands_accepted": self.policy.accepted, "rejections": dict(self.policy.rejections),
@@ -298,6 +302,13 @@ class ControllerDaemon:
     def step(self, now: float, operator):
         """The mode logic (module doc); while RUNNING, the control step. Returns the wheel torques to write,
         None if there are none: an estop sends its Estop frames at once, arming its zero torques."""
+        if self.master.foreign_commands > self.foreign_seen:
+            self.foreign_seen = self.master.foreign_commands
+            if self.mode not in (Mode.ESTOPPED, Mode.STARTING):
+                self.estop(now, f"foreign CAN master: {self.master.last_foreign}")
+            elif self.mode is Mode.ESTOPPED and now - self.last_repeat_at >= FOREIGN_REPEAT:
+                self.master.estop_all()         # undo what the other master may have re-armed
+                self.last_repeat_at = now
         if self.status.estop_requested and self.mode not in (Mode.ESTOPPED, Mode.STARTING):
             self.estop(now, "estop requested by the operator")
         if self.mode is Mode.STARTING:
@@ -405,9 +416,10 @@ class ControllerDaemon:
             self.master.reset_arming()
             self.master.request_arming()
             self.mode = Mode.ARMING
-        elif decision.action == "estop" or self.status.estop_requested:
+        elif decision.action == "estop" or self.status.estop_requested or self.master.foreign_commands:
             reason = (saved.reason if isinstance(saved, checkpoints.Checkpoint) and saved.estop
                       else "estop requested by the operator" if self.status.estop_requested
+                      else f"foreign CAN master: {self.master.last_foreign}" if self.master.foreign_commands
                       else "a drive reports an Estop")
             self.estop(now, f"latched at start: {reason}")
         else:

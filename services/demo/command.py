@@ -41,6 +41,7 @@ from pathlib import Path
 
 from sharedctl.protocol import keys
 from sharedctl.scenario import ScenarioError
+from sharedctl.services import can_bus
 
 from sharedctl.services.children import (Child, free_udp_port, raise_priority, start_child, udp_receive_buffer_errors,
                                          wait_listening)
@@ -75,6 +76,8 @@ def add_parser(subparsers) -> None:
     p.add_argument("--no-reference", action="store_true", help="skip the in-process sampled reference run")
     p.add_argument("--log-dir", metavar="DIR",
                    help="keep the children's output here (default: a temporary directory, removed on success)")
+    can_bus.add_arguments(p, "host-local udp_multicast on a free port of its own, so that demos never share a bus; "
+                             "give the robot's and the controller's bus to join it from outside")
     add_fault_arguments(p)
     add_record_argument(p)
     add_secure_arguments(p)
@@ -83,6 +86,21 @@ def add_parser(subparsers) -> None:
 
 
 # ----- the command -------------------------------------------------------------
+def bus_arguments(args) -> list[str]:
+    """The CAN arguments of the robot and the controller: the bus given (`--can-interface/--can-channel/
+    --can-option`), else host-local udp_multicast on a free port. `can.*` faults put a gateway between two
+    udp_multicast buses of their own, so they take no bus from outside."""
+    given = args.can_interface is not None or args.can_channel is not None or args.can_option
+    if not given:
+        return ["--can-interface", "udp_multicast", "--can-option", f"port={free_udp_port()}"]
+    if not args.fault or not any(spec.strip().startswith("can.") for spec in args.fault):
+        spec = can_bus.spec_from_args(args)            # validates: a channel where the interface needs one
+        argv = ["--can-interface", spec.interface, "--can-channel", spec.channel]
+        return argv + [a for k, v in spec.options.items() for a in ("--can-option", f"{k}={v}")]
+    raise ValueError("can.* faults put a gateway between two buses of their own: they cannot be combined with "
+                     "--can-interface/--can-channel/--can-option")
+
+
 def run(args) -> int:
     stop = StopFlag().install()
     try:
@@ -93,6 +111,7 @@ def run(args) -> int:
                          else f"tcp/127.0.0.1:{free_loopback_port()}")
         keys.check_robot_id(args.robot_id)
         faults = FaultStack.from_args(args)   # --fault SPEC: see services/faults/stack.py
+        can = bus_arguments(args)
     except (ScenarioError, EndpointError, ValueError) as exc:
         print(f"sharedctl demo: {exc}", file=sys.stderr)
         return 2
@@ -101,7 +120,6 @@ def run(args) -> int:
         print("sharedctl demo: --duration must be positive", file=sys.stderr)
         return 2
     robot_ep = f"tcp/127.0.0.1:{free_loopback_port()}"
-    can = ["--can-interface", "udp_multicast", "--can-option", f"port={free_udp_port()}"]
     can_controller, can_robot = faults.can_arguments(can, free_udp_port)
     console_ep = faults.console_endpoint(controller_ep, free_loopback_port)
     interactive = not args.headless and sys.stdin.isatty() and sys.stdout.isatty()

@@ -75,11 +75,58 @@ def test_arming_is_retried_after_the_timeout(master):
 
 
 def test_own_command_frames_echoed_by_the_bus_are_ignored(master):
-    for frame in (cs.SetInputTorque(0, 1.5), cs.Estop(1), cs.SetAxisState(2, AxisState.IDLE), cs.ClearErrors(0)):
+    own = (cs.SetInputTorque(0, 1.5), cs.Estop(1), cs.SetAxisState(2, AxisState.IDLE), cs.ClearErrors(0))
+    for frame in own:
+        master.send(frame)
+    for frame in own:
         master.handle(message(frame), 1.0)
-    master.handle(message(cs.PollRequest(0, cs.CommandId.GET_ERROR)), 1.0)
-    assert master.echoes_ignored == 5
+    master.handle(message(cs.PollRequest(0, cs.CommandId.GET_ERROR)), 1.0)   # a poll commands nothing
+    assert master.echoes_ignored == 5 and master.foreign_commands == 0 and master.take_events() == []
     assert all(a.state is None and a.estimate is None for a in master.axes.values())
+
+
+class WallClock:
+    t = 1000.0
+
+    def __call__(self):
+        return self.t
+
+
+@pytest.mark.parametrize("frame", [cs.SetInputTorque(1, 0.5), cs.SetAxisState(0, AxisState.CLOSED_LOOP_CONTROL),
+                                   cs.ClearErrors(2), cs.Estop(1), cs.SetLimits(0, 5.0, 10.0),
+                                   cs.SetInputVel(2, 1.0, 0.0)])
+def test_a_drive_command_this_side_did_not_send_is_another_masters_and_named(master, frame):
+    """What used to pass as this side's echo: a torque (or any command) frame nobody here sent."""
+    master.send(cs.SetInputTorque(1, 0.25))                 # ours, with its echo below
+    master.handle(message(cs.SetInputTorque(1, 0.25)), 1.0)
+    master.handle(message(frame), 1.0)
+    arbitration_id = cs.encode(frame).arbitration_id
+    assert master.echoes_ignored == 1 and master.foreign_commands == 1 and master.foreign == {arbitration_id: 1}
+    [event] = master.take_events()
+    assert event.severity == "critical" and f"0x{arbitration_id:03X}" in event.text
+    assert type(frame).__name__ in event.text and f"node {frame.node_id}" in event.text
+
+
+def test_each_frame_sent_matches_one_echo_and_only_within_the_echo_window():
+    wall = WallClock()
+    master = CanMaster(MemoryBus(), clock=Clock(), wall_clock=wall)
+    master.send(cs.SetInputTorque(0, 1.0))
+    master._handle(*_fields(cs.SetInputTorque(0, 1.0)), 1.0, stamp=wall.t)
+    master._handle(*_fields(cs.SetInputTorque(0, 1.0)), 1.0, stamp=wall.t)      # the same value once more
+    assert (master.echoes_ignored, master.foreign_commands) == (1, 1)
+    master.send(cs.SetInputTorque(0, 2.0))
+    master._handle(*_fields(cs.SetInputTorque(0, 2.0)), 1.0, stamp=wall.t + 0.3)   # arrived 0.3 s after the send
+    assert (master.echoes_ignored, master.foreign_commands) == (1, 2)
+    # a lost echo does not stop the next from matching; the order of this side's frames is the bus's
+    master.send(cs.SetInputTorque(0, 3.0))
+    master.send(cs.SetInputTorque(1, 3.0))
+    master._handle(*_fields(cs.SetInputTorque(1, 3.0)), 1.0, stamp=wall.t)
+    assert (master.echoes_ignored, master.foreign_commands) == (2, 2)
+
+
+def _fields(frame):
+    f = cs.encode(frame)
+    return f.arbitration_id, f.is_remote, False, f.dlc, f.data
 
 
 def test_bad_frames_are_counted_and_skipped(master):
@@ -194,8 +241,10 @@ def test_a_non_finite_torque_raises_the_codecs_error_and_sends_nothing():
 
 def test_an_echo_of_our_own_torque_frame_is_counted_and_not_decoded():
     master = CanMaster(RawBus())
+    master.send_torques([0.0, 2.5, 0.0])
     master.handle(message(cs.SetInputTorque(1, 2.5)), 1.0)
     assert master.echoes_ignored == 1 and master.bad_frame_count == 0 and master.rx_frames == 1
+    assert master.foreign_commands == 0
 
 
 def test_encoder_estimates_reach_the_axes_through_the_per_period_path():
@@ -249,7 +298,8 @@ def test_the_per_period_path_and_the_codec_path_agree_on_every_frame(seed):
         codec.handle(msg, t)
         assert [fast.axes[n].estimate for n in (0, 1, 2)] == [codec.axes[n].estimate for n in (0, 1, 2)]
     assert fast.rx_frames == codec.rx_frames
-    assert fast.echoes_ignored == codec.echoes_ignored > 100
+    assert fast.echoes_ignored == codec.echoes_ignored and fast.foreign == codec.foreign
+    assert fast.echoes_ignored + fast.foreign_commands > 100
     assert fast.bad_frames == codec.bad_frames and sum(fast.bad_frames.values()) > 100
     assert fast.implausible_estimates == codec.implausible_estimates
     assert [fast.axes[n].positions_rejected_in_a_row for n in (0, 1, 2)] == \
