@@ -300,7 +300,12 @@ class CanMaster:
         if axis.estimate_frame_at is not None and now > axis.estimate_frame_at:
             axis.estimate_intervals.append(now - axis.estimate_frame_at)
         axis.estimate_frame_at = now
-        axis.estimate, reason = self.encoder_check.judge(axis.estimate, pos, vel, now, axis.positions_rejected_in_a_row)
+        before = axis.estimate
+        axis.estimate, reason = self.encoder_check.judge(before, pos, vel, now, axis.positions_rejected_in_a_row)
+        if before is not None and axis.estimate.epoch != before.epoch:
+            self.events.append(CanEvent("fault", "error", f"axis {axis.node_id}: encoder jumped from "
+                                        f"{before.pos_turns:.3f} to {pos:.3f} turns and stayed there (a drive "
+                                        "restart?): a new origin, its travel over the gap taken from its speeds"))
         if reason is not None:
             self.implausible_estimates[reason] += 1
         axis.positions_rejected_in_a_row = axis.positions_rejected_in_a_row + 1 if reason else 0

@@ -276,6 +276,8 @@ class ControllerDaemon:
         estimates = self.master.estimates()
         self.q, self.v = self.odometry.update(estimates)
         self.feedback_age = oldest_feedback_age(estimates, now)
+        if self.odometry.uncertainty > self.config.pose_tolerance and self.refusal is None:
+            self.pose_lost(now)
         for ev in self.master.take_events():
             self.emit(now, f"can:{ev.text[:8]}", ev.kind, ev.severity, ev.text)
         with self.lock:
@@ -424,6 +426,16 @@ class ControllerDaemon:
             self.estop(now, f"latched at start: {reason}")
         else:
             self.mode = Mode.HELD
+
+    def pose_lost(self, now: float) -> None:
+        """A drive's encoder took a new origin while its wheel turned (odometry.py): the pose may be off by more
+        than `pose_tolerance`. Stop, and arm no more in this life."""
+        self.refusal = (f"arming refused: a drive's encoder took a new origin while its wheel turned, so the pose "
+                        f"may be off by up to {self.odometry.uncertainty * 100:.1f} cm. Restart the controller with "
+                        "--pose scenario once the robot stands at the scenario's start pose")
+        if self.mode in (Mode.ARMING, Mode.RUNNING):
+            self.estop(now, "the pose is no longer known (a drive's encoder restarted while its wheel turned)")
+        self.emit(now, "refused", "fault", "critical", self.refusal)
 
     def save_checkpoint(self, now: float, force: bool = False, ended: bool = False) -> None:
         """The checkpoint (checkpoint.py), when due or forced; never before the start is decided, nor after a

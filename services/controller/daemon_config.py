@@ -41,3 +41,4 @@ class DaemonConfig:
     checkpoint: Path | None = None      # the checkpoint file (checkpoint.py); None: none written or read
     checkpoint_interval: float = CHECKPOINT_INTERVAL  # s between checkpoints while running
     checkpoint_max_age: float = CHECKPOINT_MAX_AGE    # s: an older checkpoint is not resumed from
+    pose_tolerance: float = 0.01        # m: wheel travel the odometry may have missed before arming is refused

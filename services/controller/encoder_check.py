@@ -33,8 +33,9 @@ an error that lands on another whole number of periods can pass (the odometry in
 increments, so the next good frame undoes it).
 
 A dropped frame is counted by the caller. `rebaseline_after` consecutive rejections
-accept the new frame as it is: a drive that restarted from 0 turns is a real discontinuity
-(the odometry re-baselines on it and keeps its pose), not a corruption that repeats itself.
+accept the new frame as it is, with the next `epoch`: a drive that restarted from 0 turns is a
+real discontinuity, not a corruption that repeats itself, and the odometry takes the wheel's
+travel over it from its speeds (odometry.py), never from the jump.
 """
 from __future__ import annotations
 
@@ -61,9 +62,10 @@ class EncoderCheck:
         if not (math.isfinite(pos) and math.isfinite(vel)):
             # the codec refuses non-finite values; kept here so the odometry never sees one
             held = prev if prev is not None else AxisEstimate(0.0, 0.0, now)
-            return AxisEstimate(held.pos_turns, held.vel_turns_s, now), "implausible_position"
+            return AxisEstimate(held.pos_turns, held.vel_turns_s, now, held.epoch), "implausible_position"
         if prev is None:
             return AxisEstimate(pos, vel, now), None
+        epoch = prev.epoch
         v_prev, p_prev = prev.vel_turns_s, prev.pos_turns
         arrived = min(max(round((now - prev.received) / self.period), 1), self.max_periods)
         reason = None
@@ -73,9 +75,11 @@ class EncoderCheck:
             tolerance = self.pos_slack + self.speed_slack * max(abs(vel), abs(v_prev))
             if self._periods(pos - p_prev, v_prev, vel, tolerance) is None:
                 reason = "implausible_position"
-        if reason is not None and rejected_in_a_row + 1 < self.rebaseline_after:
-            return prev, reason          # dropped: the wheel's previous estimate stands, as for a lost frame
-        return AxisEstimate(pos, vel, now), None
+        if reason is not None:
+            if rejected_in_a_row + 1 < self.rebaseline_after:
+                return prev, reason      # dropped: the wheel's previous estimate stands, as for a lost frame
+            epoch += 1                   # a jump that persists: a new origin
+        return AxisEstimate(pos, vel, now, epoch), None
 
     def _periods(self, increment: float, v_prev: float, vel: float, tolerance: float) -> int | None:
         """The k in 1 … max_periods whose trapezoid ½(v_prev + v)·k·period is nearest `increment`, if

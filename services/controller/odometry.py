@@ -11,6 +11,16 @@ trapezoidal rule for q̇ = B(ψ)⁻ᵀ φ̇ without needing a time base: a late 
 loses no distance, and the controller's clock and the drive's clock never have to agree.
 (`source="velocity"` integrates q̇ with the trapezoidal rule over the measured time step
 instead, for drives that report no position.)
+
+A drive that restarts counts its encoder from a new origin (0 turns on an incremental encoder).
+The plausibility check (encoder_check.py) drops the first readings of such a jump and then takes
+the new origin, marking the estimate with a new `epoch`. Across an epoch change the position
+increment means nothing: the wheel's travel over the gap is taken from its speeds instead,
+½(v_before + v_after)·gap, and the most it could be off — max(|v_before|, |v_after|)·gap of
+wheel travel, valid while the robot is braked over the gap (the controller Estops within its
+feedback timeout of a drive falling silent or leaving closed loop) — adds to `uncertainty` (m).
+A jump of more than `max_step_turns` between two updates is a discontinuity too (all wheels
+re-baselined, the pose kept).
 """
 from __future__ import annotations
 
@@ -26,11 +36,13 @@ TWO_PI = 2.0 * math.pi
 
 @dataclass
 class AxisEstimate:
-    """The latest encoder estimate of one wheel: turns, turns/s and when it arrived (s)."""
+    """The latest encoder estimate of one wheel: turns, turns/s and when it arrived (s); `epoch` counts the
+    encoder's new origins (encoder_check.py: a jump that persisted, e.g. a drive that restarted)."""
 
     pos_turns: float
     vel_turns_s: float
     received: float
+    epoch: int = 0
 
 
 @dataclass
@@ -47,12 +59,14 @@ class WheelOdometry:
     source: str = "position"           # "position" (angle increments) or "velocity" (trapezoid on q̇)
     max_step_turns: float = 2.0        # a larger wheel increment between updates is a discontinuity (drive reset)
     discontinuities: int = field(init=False, default=0)
+    uncertainty: float = field(init=False, default=0.0)   # m of wheel travel the pose may have missed
     q: np.ndarray = field(init=False)
     v: np.ndarray = field(init=False)
     updates: int = field(init=False, default=0)
     wheel_map: WheelMap = field(init=False, repr=False)   # the model's B(ψ) in closed form
     _last_pos: list | None = field(init=False, default=None)
     _last_time: float | None = field(init=False, default=None)
+    _last_axes: list | None = field(init=False, default=None)    # (epoch, vel, received) per wheel
 
     def __post_init__(self) -> None:
         if self.source not in ("position", "velocity"):
@@ -78,6 +92,11 @@ class WheelOdometry:
         q = self.q.tolist()
         v_new = self.wheel_map.body_velocity(q, omega)
         last = self._last_pos
+        axes = [(e.epoch, e.vel_turns_s, e.received) for e in estimates]
+        if last is not None and self._last_axes is not None and any(
+                a[0] != b[0] for a, b in zip(axes, self._last_axes)):
+            last = self._new_origins(pos, last, axes)
+        self._last_axes = axes
         if last is not None and any(abs(p - p0) > self.max_step_turns for p, p0 in zip(pos, last)):
             self.discontinuities += 1       # e.g. a drive restarted from 0 turns: re-baseline, keep the pose
             last = None
@@ -94,12 +113,26 @@ class WheelOdometry:
         self.updates += 1
         return self.q.copy(), self.v.copy()
 
+    def _new_origins(self, pos: list, last: list, axes: list) -> list:
+        """The baseline with each wheel whose encoder took a new origin moved so that its increment is the
+        speed-based travel over the gap; the bound on that guess goes into `uncertainty`."""
+        last = list(last)
+        radius = self.model.parameters.wheel_radius
+        for j, ((epoch, v1, t1), (epoch0, v0, t0)) in enumerate(zip(axes, self._last_axes)):
+            if epoch != epoch0:
+                gap = max(t1 - t0, 0.0)
+                last[j] = pos[j] - 0.5 * (v0 + v1) * gap
+                self.uncertainty += TWO_PI * radius * max(abs(v0), abs(v1)) * gap
+                self.discontinuities += 1
+        return last
+
     def resume(self, q, turns) -> None:
         """Continue from pose `q`, known to belong to the encoder readings `turns` (a checkpoint's pair, or the
         readings when the pose was declared): the next `update` integrates the increments from `turns` on."""
         self.q = np.asarray(q, dtype=float).copy()
         self.v = np.zeros_like(self.q)
         self._last_pos = [float(t) for t in turns]
+        self._last_axes = None          # a new process's epochs start afresh
 
     def baseline(self) -> tuple[list, list] | None:
         """(q, turns): the pose and the encoder readings it was integrated up to (None before any update)."""

@@ -245,3 +245,50 @@ def test_the_default_checkpoint_lives_in_the_state_folder(monkeypatch, tmp_path)
     monkeypatch.delenv("SHAREDCTL_STATE_DIR")
     monkeypatch.setenv("XDG_STATE_HOME", str(tmp_path / "xdg"))
     assert checkpoints.default_path("r7") == Path(tmp_path / "xdg" / "sharedctl" / "controller-r7.checkpoint")
+
+
+# ----------------------------------------------------------------------------- a drive that restarts
+def reboot_wheel_1(d, t0, before, after, vel_before=0.0, vel_after=0.0, gap=0.6):
+    """Wheel 1's drive falls silent for `gap` s and comes back counting from `after` turns (the others steady)."""
+    for k in range(20):                                   # steady frames, the wheel at `before`
+        t = t0 + 0.002 * k
+        d.master.handle(message(cs.GetEncoderEstimates(1, before + vel_before * 0.002 * k, vel_before)), t)
+        for n in (0, 2):
+            d.master.handle(message(cs.GetEncoderEstimates(n, 0.5, 0.0)), t)
+        d.tick(t + 0.0002)
+    t = t0 + 0.04 + gap
+    for k in range(10):                                   # back, from its new origin
+        now = t + 0.002 * k
+        d.master.handle(message(cs.GetEncoderEstimates(1, after + vel_after * 0.002 * k, vel_after)), now)
+        for n in (0, 2):
+            d.master.handle(message(cs.GetEncoderEstimates(n, 0.5, 0.0)), now)
+        d.master.handle(message(cs.Heartbeat(1, ODriveError.NONE, AxisState.IDLE)), now)
+        d.tick(now + 0.0002)
+    return now
+
+
+def test_an_encoder_that_restarts_by_less_than_two_turns_at_rest_moves_nothing(tmp_path):
+    d = daemon(None, pose="scenario")
+    d.begin()
+    feed(d, 10.001, (0.5, 1.3, 0.5))
+    d.tick(10.002)
+    q_before = d.q.copy()
+    reboot_wheel_1(d, 10.004, before=1.3, after=0.0)      # 1.3 turns ≈ 0.32 m of wheel travel, if integrated
+    assert d.q == pytest.approx(q_before, abs=1e-9)
+    assert d.odometry.discontinuities == 1 and d.odometry.uncertainty == 0.0 and d.refusal is None
+    assert any("encoder jumped from 1.300 to 0.000" in e.text for e in events(d))
+
+
+def test_an_encoder_that_restarts_while_its_wheel_turns_makes_the_pose_unknown_and_arming_refused(tmp_path):
+    d = daemon(None, pose="scenario")
+    d.begin()
+    feed(d, 10.001, (0.5, 1.3, 0.5))
+    d.tick(10.002)
+    now = reboot_wheel_1(d, 10.004, before=1.3, after=0.0, vel_before=2.0, vel_after=0.0)
+    assert d.odometry.uncertainty > 0.01 and "arming refused" in d.refusal
+    assert d.mode is Mode.ESTOPPED
+    d.master.bus.take()
+    operator(d, 1, now + 0.002, request=ControlRequest.TAKE)
+    feed(d, now + 0.002, (0.5, 0.0, 0.5))
+    d.tick(now + 0.002)
+    assert d.mode is Mode.ESTOPPED and not any(isinstance(f, cs.ClearErrors) for f in d.master.bus.take())
