@@ -281,6 +281,7 @@ class ControllerDaemon:
         for ev in self.master.take_events():
             self.emit(now, f"can:{ev.text[:8]}", ev.kind, ev.severity, ev.text)
         with self.lock:
+            self.policy.pose = self.q               # what an operator's wish is judged against (admission.py)
             self.apply_commands()
             operator, status = self.policy.operator_input(now, self.q)
             self.take_requests, self.current_command = self.policy.take_requests, self.policy.current

@@ -5,8 +5,9 @@ have their own sequence per session: a replayed or stale take does nothing) and 
 `OperatorLease`. Every query gets a reply, a refusal included, so a console never waits for
 its timeout to learn why. Refusals are counted by reason, prefixed `lease_`:
 `lease_refused` (another session holds control, or a release by a non-holder), and
-`lease_duplicate_seq`, `lease_out_of_order_seq`, `lease_stale`, `lease_clock_skew`, or the
-decoder's error name (`lease_MalformedPayload`, …).
+`lease_duplicate_seq`, `lease_out_of_order_seq`, `lease_stale`, `lease_clock_skew`,
+`lease_rate_limited` (more than the session's rate: admission.py), or the decoder's error name
+(`lease_MalformedPayload`, …).
 """
 from __future__ import annotations
 
@@ -17,13 +18,15 @@ from sharedctl.protocol.messages import LeaseReply, LeaseRequest
 from sharedctl.protocol.msgpack_codec import decode_message
 from sharedctl.protocol.wire_types import MAX_TEXT_LEN
 
+from .admission import RateLimit
 from .lease import OperatorLease
 from .replay_guard import ReplayGuard
 
 
 def answer(payload: bytes, lease: OperatorLease, guard: ReplayGuard, rejections: Counter,
-           now: float, wall_now: float) -> LeaseReply:
-    """The reply to one lease query received at `now` (s, monotonic) / `wall_now` (s, wall clock)."""
+           now: float, wall_now: float, limit: RateLimit | None = None) -> LeaseReply:
+    """The reply to one lease query received at `now` (s, monotonic) / `wall_now` (s, wall clock); `limit`: the
+    queries' rate per session."""
     try:
         request = decode_message(bytes(payload), None, expect=LeaseRequest)
     except ProtocolError as exc:
@@ -32,7 +35,10 @@ def answer(payload: bytes, lease: OperatorLease, guard: ReplayGuard, rejections:
     except Exception as exc:  # noqa: BLE001 — a bad payload never escapes the queryable
         rejections[f"lease_unexpected_{type(exc).__name__}"] += 1
         return _reply(0, wall_now, False, lease, now, "malformed lease request")
-    reason = guard.admit(f"{request.operator_id}/{request.session_id}", request.seq, request.time, now, wall_now)
+    key = f"{request.operator_id}/{request.session_id}"
+    reason = guard.admit(key, request.seq, request.time, now, wall_now)
+    if reason is None and limit is not None and not limit.admit(key, now):
+        reason = "rate_limited"
     if reason is not None:
         rejections[f"lease_{reason}"] += 1
         return _reply(request.seq, wall_now, False, lease, now, f"request dropped: {reason}")

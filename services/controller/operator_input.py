@@ -42,6 +42,7 @@ from sharedctl.protocol.wire_types import ROBOT_DIMS, Dims
 from sharedctl.shared_controller import OperatorInput
 from sharedctl.transform import Desired
 
+from .admission import LEASE_BURST, LEASE_RATE, RateLimit, WishBounds
 from .lease import OperatorLease
 from .replay_guard import ReplayGuard
 
@@ -79,6 +80,10 @@ class OperatorInputPolicy:
     take_requests: int = 0                   # accepted commands asking control_request = take
     lease: OperatorLease = field(default_factory=OperatorLease)   # who may command (lease.py)
     guard: ReplayGuard = field(default_factory=ReplayGuard)       # order and age (replay_guard.py)
+    limit: RateLimit = field(default_factory=RateLimit)           # commands per session (admission.py)
+    lease_limit: RateLimit = field(default_factory=lambda: RateLimit(LEASE_RATE, LEASE_BURST))   # lease queries
+    bounds: WishBounds = field(default_factory=WishBounds)        # the wish near the robot (admission.py)
+    pose: object = None                                           # the robot's pose, as the loop last read it
     _recent: deque = field(default_factory=deque)        # seqs of the current session
     _input_of: tuple | None = None                        # (command, hands_off) that `_input` was built from
     _input: OperatorInput | None = None
@@ -109,8 +114,13 @@ class OperatorInputPolicy:
         if command.estop:
             self.estop_requested = True          # honoured from anyone, before any other check
         # keyed by operator and session: another sender naming this session cannot advance its seq
-        reason = self.guard.admit(f"{command.operator_id}/{command.session_id}", command.seq, command.send_time,
-                                  now, wall_now)
+        key = f"{command.operator_id}/{command.session_id}"
+        reason = self.guard.admit(key, command.seq, command.send_time, now, wall_now)
+        if reason is None and not self.limit.admit(key, now):
+            reason = "rate_limited"
+        if reason is None:
+            reason = self.bounds.judge(command.q_d, command.qd_d, command.qdd_d,
+                                       command.q_d if self.pose is None else self.pose)
         if reason is None:
             reason = self.lease.admit_command(command.operator_id, command.session_id, command.control_request, now)
             if reason is None:

@@ -61,7 +61,7 @@ class ControllerLinks:
         except Exception:  # noqa: BLE001 — an unreadable payload is answered as an empty (refused) request
             payload = b""
         reply = lease_queries.answer(payload, self.policy.lease, self.lease_guard, self.policy.rejections,
-                                     time.monotonic(), time.time())
+                                     time.monotonic(), time.time(), self.policy.lease_limit)
         try:
             query.reply(keys.lease_key(self.robot_id), encode_message(reply))
         except Exception as exc:  # noqa: BLE001 — a vanished querier must not stop anything
