@@ -6,6 +6,17 @@ import threading
 import time
 
 
+_WALL0, _MONO0 = time.time(), time.monotonic()
+
+
+def steady_wall() -> float:
+    """Wall-clock seconds that never step: the wall clock read once, at import, carried forward on the
+    monotonic clock (which NTP slews but never steps). For the times a process sends (an operator
+    command's `send_time`): a host's clock stepped by 0.5–2 s must not make its messages look stale or
+    early to their receiver (services/controller/replay_guard.py)."""
+    return _WALL0 + (time.monotonic() - _MONO0)
+
+
 class StopFlag:
     """Set by SIGINT or SIGTERM (install() in the main thread) or by stop()."""
 

@@ -9,6 +9,14 @@ RobotState arrives (the controller is up), and nothing is sent before that. Keyb
 the virtual joystick drives (before the first RobotState its wish is around the scenario's
 initial pose). In both modes X/Esc requests an emergency stop and C clears the request.
 
+Hands-off when the console cannot see (keyboard mode): while its own UI loop has not run for
+`UI_STALE` s (frozen terminal, stalled redraw) or the last RobotState is older than
+`TELEMETRY_STALE` s (the operator would drive on an old picture), every command goes out with the
+deadman released, no deflection and the wish at the last known pose (an estop request still goes
+out); the dashboard says why. The scripted operator follows its script whatever it sees.
+Send times come from a wall clock that never steps (`lifecycle.steady_wall`), so a step of this
+host's clock cannot make its commands look stale to the controller.
+
 Control (lease_client.py): the console takes the operator authority lease at start (retrying
 until the controller answers), T takes and R releases it, and commands are sent only while
 this console holds control — an estop request always. The script's clock starts when the
@@ -105,6 +113,10 @@ class Telemetry:
             self.event_count += 1
 
 
+UI_STALE = 0.5          # s without a run of the UI loop: the console's operator sees nothing new
+TELEMETRY_STALE = 0.5   # s since the last RobotState: the picture the operator drives on is that old
+
+
 class ConsoleApp:
     def __init__(self, options: ConsoleOptions) -> None:
         self.options = options
@@ -121,12 +133,15 @@ class ConsoleApp:
         self.last_command: OperatorCommand | None = None
         self.sent = 0
         self.publish_errors = 0
+        self.ui_alive_at = time.monotonic()   # the UI loop's last run (monotonic s)
+        self.blind: str | None = None          # why commands go out hands-off, None while the operator sees
+        self.blind_commands = 0
 
     # ----- commands ---------------------------------------------------------
     def next_command(self, now: float) -> OperatorCommand | None:
         """The command to send at monotonic time `now` (None: nothing to send yet)."""
         with self.telemetry.lock:
-            state = self.telemetry.state
+            state, arrival = self.telemetry.state, self.telemetry.state_arrival
         holding = self.lease.holding
         with self.lock:
             estop = self.keyboard.joystick.estop
@@ -137,7 +152,10 @@ class ConsoleApp:
                     self.script_origin = now
                 return self.script.command(now - self.script_origin, state, estop=estop)
             pose = self.q0 if state is None else np.asarray(state.q, float)
-            command = self.keyboard.command(now, pose)
+            self.blind = blind(now, self.ui_alive_at, arrival)
+            command = self.keyboard.command(now, pose, hands_off=self.blind is not None)
+            if self.blind is not None and (holding or command.estop):
+                self.blind_commands += 1
             return command if holding or command.estop else None
 
     def sender(self, publisher, stop: StopFlag) -> None:
@@ -179,6 +197,8 @@ class ConsoleApp:
         if self.script is not None and origin is not None:
             view.script_time = now - origin
         view.control = self.lease.status()
+        if self.script is None and self.blind is not None:
+            view.control += f" · HANDS-OFF: {self.blind}"
         return view
 
     # ----- the process ------------------------------------------------------
@@ -205,6 +225,7 @@ class ConsoleApp:
                 next_draw = 0.0
                 while not stop.stopped:
                     now = time.monotonic()
+                    self.ui_alive_at = now
                     if opts.duration is not None and now - start >= opts.duration:
                         break
                     typed = reader.read()
@@ -266,6 +287,17 @@ class ConsoleApp:
         if grid is None or abs(yaw - grid_yaw) > 0.1:
             grid, grid_yaw = background(self.loop.feasible, frame, yaw, self.q0), yaw
         return frame, grid, grid_yaw
+
+
+def blind(now: float, ui_alive_at: float, state_arrival: float | None) -> str | None:
+    """Why the operator cannot see at `now` (monotonic s), or None: the UI loop stalled, or telemetry is old."""
+    if now - ui_alive_at > UI_STALE:
+        return f"console UI frozen for {now - ui_alive_at:.1f} s"
+    if state_arrival is None:
+        return "no telemetry yet"
+    if now - state_arrival > TELEMETRY_STALE:
+        return f"telemetry {now - state_arrival:.1f} s old"
+    return None
 
 
 class _NoKeys:

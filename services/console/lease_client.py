@@ -15,12 +15,13 @@ estop always (the controller honours an estop from any operator).
 from __future__ import annotations
 
 import threading
-import time
 
 from sharedctl.protocol import keys
 from sharedctl.protocol.errors import ProtocolError
 from sharedctl.protocol.messages import LeaseAction, LeaseReply, LeaseRequest
 from sharedctl.protocol.msgpack_codec import decode_message, encode_message
+
+from ..lifecycle import steady_wall
 
 RETRY = 0.25          # s between lease queries while what we want differs from what we have
 QUERY_TIMEOUT = 0.5   # s a query waits for the controller's reply
@@ -81,7 +82,7 @@ class LeaseClient:
         with self.lock:
             self.seq += 1
             request = LeaseRequest(operator_id=self.operator_id, session_id=self.session_id, seq=self.seq,
-                                   time=time.time(), action=action)
+                                   time=steady_wall(), action=action)
         self.queries += 1
         reply = None
         try:

@@ -14,7 +14,6 @@ from the unclipped one by 0.5 mm (convex) and 2.3 mm (non-convex) in final pose.
 from __future__ import annotations
 
 import secrets
-import time
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -22,6 +21,7 @@ import numpy as np
 from sharedctl.human import HumanModel
 from sharedctl.protocol.messages import ControlRequest, OperatorCommand, RobotState
 
+from ..lifecycle import steady_wall
 from .keyboard import VirtualJoystick
 
 
@@ -67,7 +67,7 @@ class ScriptedCommandSource:
             operator_id=self.counter.operator_id,
             session_id=self.counter.session_id,
             seq=self.counter.next(),
-            send_time=time.time() if send_time is None else send_time,
+            send_time=steady_wall() if send_time is None else send_time,
             joystick=clip_deflection(handle.deflection),
             q_d=tuple(float(x) for x in wish.q),
             qd_d=tuple(float(x) for x in wish.q_dot),
@@ -85,22 +85,23 @@ class KeyboardCommandSource:
     joystick: VirtualJoystick = field(default_factory=VirtualJoystick)
     counter: CommandCounter = field(default_factory=CommandCounter)
 
-    def command(self, now: float, pose, *, send_time: float | None = None) -> OperatorCommand:
-        """The command at monotonic time `now` for the latest pose estimate."""
+    def command(self, now: float, pose, *, send_time: float | None = None, hands_off: bool = False) -> OperatorCommand:
+        """The command at monotonic time `now` for the latest pose estimate; `hands_off`: deadman released, no
+        deflection, the wish at the pose (an estop request still goes out)."""
         pose = np.asarray(pose, float)
-        deflection = self.joystick.deflection(now)
-        wish = self.joystick.wish(pose, now)
+        deflection = self.joystick.deflection(now) * (0.0 if hands_off else 1.0)
+        wish = pose if hands_off else self.joystick.wish(pose, now)
         zeros = tuple(0.0 for _ in pose)
         return OperatorCommand(
             operator_id=self.counter.operator_id,
             session_id=self.counter.session_id,
             seq=self.counter.next(),
-            send_time=time.time() if send_time is None else send_time,
+            send_time=steady_wall() if send_time is None else send_time,
             joystick=clip_deflection(deflection),
             q_d=tuple(float(x) for x in wish),
             qd_d=zeros,
             qdd_d=zeros,
-            deadman=self.joystick.deadman(now),
+            deadman=self.joystick.deadman(now) and not hands_off,
             estop=self.joystick.estop,
-            control_request=self.joystick.control_request(now),
+            control_request=ControlRequest.NONE if hands_off else self.joystick.control_request(now),
         )

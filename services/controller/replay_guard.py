@@ -5,12 +5,16 @@ its session:
 
 1. **Order** — its `seq` is newer than the newest taken seq of that session; an equal seq is
    `duplicate_seq` (a replay or a duplicated delivery), a smaller one `out_of_order_seq`.
-2. **Age** — its send time fits the receiver's wall clock. The sender's clock is another host's:
-   `offset = receive_wall − send_time` is the one-way delay *plus* the clock offset between the
+2. **Age** — its send time fits the receiver's clock. The sender's clock is another host's:
+   `offset = receive − send_time` is the one-way delay *plus* the clock offset between the
    hosts, and the offset is unknown. So the age is measured relative to the session's own best
    delivery: `age = offset − min(offset of the session's taken messages over the last
    `window` s)`. The clock offset cancels (a drift of a few ppm is absorbed by the window);
-   what remains is how much later this message arrives than the fastest one did. A message
+   what remains is how much later this message arrives than the fastest one did. The receive
+   time here is the receiver's **monotonic** clock (the constant between it and the wall clock
+   cancels like the hosts' offset), so a step of the receiver's wall clock changes no age; the
+   senders (the console) stamp their messages with a wall clock that never steps
+   (`lifecycle.steady_wall`), so a step of theirs changes none either. A message
    with `age > max_age` (0.5 s by default) is `stale`: held back by a relay, re-sent from a
    capture, or overtaken by events. A constant delay is not staleness — the operator timeout
    and the link health report it.
@@ -68,9 +72,9 @@ class ReplayGuard:
             return "duplicate_seq" if seq == track.newest_seq else "out_of_order_seq"
         offset = None
         if wall_now is not None and math.isfinite(wall_now) and math.isfinite(send_time):
-            offset = wall_now - send_time
-            if self.max_skew is not None and abs(offset) > self.max_skew:
+            if self.max_skew is not None and abs(wall_now - send_time) > self.max_skew:
                 return "clock_skew"
+            offset = now - send_time            # on the monotonic clock: a wall-clock step changes no age
             if track is not None and self._age(track, offset, now) > self.max_age:
                 return "stale"
         if track is None:
@@ -103,10 +107,10 @@ class ReplayGuard:
             for key in [k for k in self._sessions if k not in self._pinned][:excess]:
                 del self._sessions[key]
 
-    def age(self, session_id: str, send_time: float, now: float, wall_now: float) -> float:
+    def age(self, session_id: str, send_time: float, now: float, wall_now: float | None = None) -> float:
         """The relative age (s) a message of this session sent at `send_time` would have now (0 without a reference)."""
         track = self._sessions.get(session_id)
-        return 0.0 if track is None else self._age(track, wall_now - send_time, now)
+        return 0.0 if track is None else self._age(track, now - send_time, now)
 
     def _age(self, track: _Session, offset: float, now: float) -> float:
         while track.offsets and track.offsets[0][0] < now - self.window:

@@ -79,3 +79,16 @@ def test_keyboard_command_carries_stick_deadman_estop_and_request():
     assert cmd.control_request is ControlRequest.TAKE
     source.joystick.press("x", 0.1)
     assert source.command(0.1, np.zeros(3)).estop
+
+
+def test_send_times_come_from_a_wall_clock_that_never_steps(monkeypatch):
+    """A step of the console host's clock must not make its commands look stale or early (replay_guard.py)."""
+    import time as time_module
+
+    from sharedctl.services import lifecycle
+    before = lifecycle.steady_wall()
+    real = time_module.time
+    monkeypatch.setattr(time_module, "time", lambda: real() - 2.0)      # the host's clock stepped back 2 s
+    source = KeyboardCommandSource()
+    sent = source.command(0.0, (0.0, 0.0, 0.0)).send_time
+    assert before <= sent < before + 1.0

@@ -1,5 +1,6 @@
 """Operator commands → OperatorInput: the staleness and ordering policy (services/controller/operator_input.py)."""
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -21,6 +22,10 @@ def command(seq, *, session="s1", joystick=(0.5, -0.25, 0.1), deadman=True, esto
 
 
 def offer(policy, cmd, now):
+    """`cmd` received at `now`; one with the default send time is stamped by a sender whose clock runs with the
+    controller's, 4 ms of delivery before it."""
+    if cmd.send_time == 100.0:
+        cmd = replace(cmd, send_time=100.0 + now)
     return policy.offer(encode_message(cmd), now, wall_now=cmd.send_time + 0.004)
 
 

@@ -99,3 +99,15 @@ def test_pins_are_bounded_too_and_a_dropped_pin_is_forgotten_like_any_session():
         admit(guard, 1, 0.0, 0.01, session=f"junk{k}")
     assert guard.sessions == 4                                   # 2 pinned (the newest pins), 2 unpinned
     assert admit(guard, 1, 0.0, 0.01, session="p4") == "duplicate_seq"
+
+
+@pytest.mark.parametrize("step", [0.6, 1.0, 2.0, -0.6, -2.0])
+def test_a_step_of_the_controllers_wall_clock_rejects_nothing(step):
+    """Threat: a wall-clock step of 0.5–2 s on the controller's host made every command look that much later
+    than the session's best delivery — stale for the 10 s window (docs/security.md). Ages run on the
+    monotonic receive time now; only the optional skew bound reads the wall clock."""
+    guard = ReplayGuard(max_age=0.5)
+    for k in range(100):                                    # 50 Hz; the wall clock steps at k = 50
+        mono = 0.02 * k + 0.01
+        wall = 5000.0 + mono + (step if k >= 50 else 0.0)
+        assert guard.admit("s1", k + 1, 0.02 * k - SKEW, mono, wall) is None, k
