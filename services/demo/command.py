@@ -86,19 +86,22 @@ def add_parser(subparsers) -> None:
 
 
 # ----- the command -------------------------------------------------------------
-def bus_arguments(args) -> list[str]:
-    """The CAN arguments of the robot and the controller: the bus given (`--can-interface/--can-channel/
-    --can-option`), else host-local udp_multicast on a free port. `can.*` faults put a gateway between two
-    udp_multicast buses of their own, so they take no bus from outside."""
+def bus_arguments(args, faults: FaultStack) -> tuple[list[str], can_bus.BusSpec]:
+    """The CAN arguments of the robot and the controller, and their bus: the one given (`--can-interface/
+    --can-channel/--can-option`), else host-local udp_multicast on a free port. `can.*` link faults put a
+    gateway between two udp_multicast buses of their own, so they take no bus from outside."""
     given = args.can_interface is not None or args.can_channel is not None or args.can_option
+    if given and faults.plan.has("can"):
+        raise ValueError("can.* faults put a gateway between two buses of their own: they cannot be combined "
+                         "with --can-interface/--can-channel/--can-option")
     if not given:
-        return ["--can-interface", "udp_multicast", "--can-option", f"port={free_udp_port()}"]
-    if not args.fault or not any(spec.strip().startswith("can.") for spec in args.fault):
-        spec = can_bus.spec_from_args(args)            # validates: a channel where the interface needs one
-        argv = ["--can-interface", spec.interface, "--can-channel", spec.channel]
-        return argv + [a for k, v in spec.options.items() for a in ("--can-option", f"{k}={v}")]
-    raise ValueError("can.* faults put a gateway between two buses of their own: they cannot be combined with "
-                     "--can-interface/--can-channel/--can-option")
+        port = free_udp_port()
+        return (["--can-interface", "udp_multicast", "--can-option", f"port={port}"],
+                can_bus.resolve("udp_multicast", None, {"port": port}))
+    spec = can_bus.spec_from_args(args)                            # validates: a channel where one is needed
+    argv = (["--can-interface", args.can_interface] if args.can_interface else []) + (
+        ["--can-channel", args.can_channel] if args.can_channel else [])
+    return argv + [a for option in args.can_option or [] for a in ("--can-option", option)], spec
 
 
 def run(args) -> int:
@@ -106,12 +109,13 @@ def run(args) -> int:
     try:
         scenario = load(args.scenario)
         loop, _, _ = scenario.closed_loop(args.controller)
-        secure = SecureStack.from_args(args, free_loopback_port)   # --secure: see services/security/secure_stack.py
+        faults = FaultStack.from_args(args)   # --fault SPEC: see services/faults/stack.py
+        secure = SecureStack.from_args(args, free_loopback_port, faults)   # --secure: services/security/secure_stack.py
         controller_ep = (check_loopback(args.zenoh_listen) if args.zenoh_listen and not secure.enabled
                          else f"tcp/127.0.0.1:{free_loopback_port()}")
         keys.check_robot_id(args.robot_id)
-        faults = FaultStack.from_args(args)   # --fault SPEC: see services/faults/stack.py
-        can = bus_arguments(args)
+        can, faults.bus = bus_arguments(args, faults)
+        faults.router = secure if secure.enabled else None
     except (ScenarioError, EndpointError, ValueError) as exc:
         print(f"sharedctl demo: {exc}", file=sys.stderr)
         return 2
@@ -146,6 +150,7 @@ def run(args) -> int:
         secure.start(log_dir, backstop, wait_listening)
         children["robot"] = start_child("robot", ["robot", "--scenario", scenario_arg,
                                                   *secure.zenoh_args("robot", ["--zenoh-listen", robot_ep]), *can_robot,
+                                                  *faults.robot_arguments(),
                                                   *common, "--duration", backstop, *_json("robot", log_dir)], log_dir)
         robot_priority = raise_priority(children["robot"].popen.pid)
         if not secure.wait_up("robot", args.robot_id, children["robot"], STARTUP_TIMEOUT,
@@ -156,6 +161,7 @@ def run(args) -> int:
         console_argv = ["console", "--script", scenario_arg,
                         *secure.zenoh_args("operator", ["--zenoh-connect", console_ep]), *common]
         console_argv += ["--zenoh-connect", recording.endpoint] if recording is not None and not secure.enabled else []
+        console_argv += [] if secure.enabled else faults.console_listener(free_loopback_port, open_session)
         children["console"] = start_child("console", console_argv + ([] if interactive else ["--headless"]), log_dir,
                                           interactive=interactive)
         # the robot is a fresh simulation standing at the scenario's start pose: the first controller is told so;
@@ -172,7 +178,8 @@ def run(args) -> int:
         session = secure.open_session(lambda: open_session(connect=[robot_ep, controller_ep]))
         if recording is not None:
             recording.attach(session)
-        faults.attach(session, args.robot_id)
+        faults.attach(secure.operator_session() if secure.enabled and faults.needs_operator_session else session,
+                      faults.listener or session, args.robot_id)
         subscribers = [session.declare_subscriber(keys.truth_key(args.robot_id), rec.on_truth),
                 session.declare_subscriber(keys.state_key(args.robot_id), rec.on_state),
                 session.declare_subscriber(keys.events_key(args.robot_id), rec.on_event)]

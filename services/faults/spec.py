@@ -33,6 +33,24 @@ set, sent straight to the controller from a session of its own — the controlle
 estop from anyone). SEC counts from the run's t = 0, the instant the operator was granted the
 lease as the controller reports it. ``seed=N`` sets the seed (``--fault-seed`` otherwise; default 0).
 
+Intruders and bad days (docs/security.md; the demo carries them out itself):
+
+=======================================  =========================================================
+``robot.reboot_at=SEC[,AXIS[,DOWN]]``    drive AXIS (default 1) of the simulated robot restarts:
+                                         silent for DOWN s (default 0.5), then IDLE, no errors, its
+                                         encoder counting from 0
+``can.intruder_at=SEC[,HZ[,DURATION]]``  another CAN master: Set_Input_Torque 2 N·m to node 0 at HZ
+                                         (default 200) for DURATION s (default 0.5) on the drives'
+                                         bus (not with the other ``can.*`` faults: their gateway
+                                         splits the bus)
+``operator.flood_at=SEC[,HZ[,DURATION]]``  well-formed commands of a session that never held the lease,
+                                         full deflection, at HZ (default 2000) for DURATION s (1)
+``operator.evict_at=SEC``                200 sessions of one command each, then the lease holder's
+                                         last command replayed as captured
+``router.restart_at=SEC[,DOWN]``         the Zenoh router (``--secure``) killed and started again DOWN
+                                         s (default 1) later on the same endpoint
+=======================================  =========================================================
+
 A bad spec raises :class:`FaultSpecError`, which names the key and the value.
 """
 from __future__ import annotations
@@ -45,6 +63,14 @@ from .impairments import (BernoulliLoss, Blackout, Corrupt, Delay, Duplicate, Gi
 
 LINKS = ("operator", "telemetry", "can")
 PROCESSES = ("controller", "console", "robot")
+INTRUSIONS = {   # (stream, key): (action, the parameters' names, their defaults after SEC)
+    ("robot", "reboot_at"): ("reboot", "SEC[,AXIS[,DOWN]]", (1.0, 0.5)),
+    ("can", "intruder_at"): ("intrude", "SEC[,HZ[,DURATION]]", (200.0, 0.5)),
+    ("operator", "flood_at"): ("flood", "SEC[,HZ[,DURATION]]", (2000.0, 1.0)),
+    ("operator", "evict_at"): ("evict", "SEC", ()),
+    ("router", "restart_at"): ("bounce", "SEC[,DOWN]", (1.0,)),
+}
+MAX_INTRUSION_HZ = 5000.0
 CAN_ID_CLASSES = ("feedback", "command", "all")
 DEFAULT_REORDER_GAP_MS = 50.0
 DEFAULT_REPLAY_AGE_MS = 500.0
@@ -87,13 +113,21 @@ class LinkFaults:
 
 @dataclass(frozen=True)
 class ProcessFault:
-    target: str          # controller | console | robot | operator (estop)
-    action: str          # kill | stop | restart | estop
+    target: str          # controller | console | robot | operator | can | router
+    action: str          # kill | stop | restart | estop; reboot | intrude | flood | evict | bounce (INTRUSIONS)
     at: float            # s from the run's t = 0 (the lease instant)
     duration: float = 0.0
+    params: tuple = ()   # an intrusion's numbers after SEC, defaults filled in (INTRUSIONS)
 
     def describe(self) -> str:
+        for (target, key), (action, _, _) in INTRUSIONS.items():
+            if (target, action) == (self.target, self.action):
+                return f"{target}.{key}=" + ",".join(f"{v:g}" for v in (self.at, *self.params))
         return f"{self.target}.{self.action}_at={self.at:g}" + (f",{self.duration:g}" if self.action == "stop" else "")
+
+    @property
+    def hz(self) -> float:
+        return self.params[0]
 
 
 @dataclass
@@ -236,7 +270,9 @@ def parse(specs: list[str], seed: int | None = None) -> FaultPlan:
         target, dot, name = key.partition(".")
         if not dot or not name:
             raise FaultSpecError(spec, f"expected STREAM.KEY with STREAM one of {', '.join(LINKS + PROCESSES)}")
-        if target == "operator" and name == "estop_at":
+        if (target, name) in INTRUSIONS:
+            plan.processes.append(_intrusion(spec, target, name, value))
+        elif target == "operator" and name == "estop_at":
             plan.processes.append(ProcessFault("operator", "estop", _number(spec, value, "SEC")))
         elif target in LINKS:
             _set_link(spec, plan.links[target], target, name, value)
@@ -245,8 +281,33 @@ def parse(specs: list[str], seed: int | None = None) -> FaultPlan:
         else:
             raise FaultSpecError(spec, f"unknown stream {target!r} (known: {', '.join(LINKS + PROCESSES)})")
     _check_restarts(plan)
+    if plan.has("can") and any(f.action == "intrude" for f in plan.processes):
+        raise FaultSpecError("can.intruder_at", "the other can.* faults put a gateway between two buses; an "
+                                                "intruder needs the one bus of the drives and the controller")
     plan.processes.sort(key=lambda f: f.at)
     return plan
+
+
+def _intrusion(spec: str, target: str, name: str, value: str) -> ProcessFault:
+    action, form, defaults = INTRUSIONS[(target, name)]
+    parts = _parts(spec, value, 1, 1 + len(defaults), form)
+    at = _number(spec, parts[0], "SEC")
+    params = [_number(spec, p, form.split(",")[i + 1].strip("[]"), 0.0, MAX_INTRUSION_HZ)
+              for i, p in enumerate(parts[1:])]
+    params += list(defaults[len(params):])
+    if action == "reboot":
+        if params[0] not in (0.0, 1.0, 2.0) or not params[1] > 0:
+            raise FaultSpecError(spec, "AXIS must be 0, 1 or 2 and DOWN positive")
+        return ProcessFault(target, action, at, params[1], (params[0], params[1]))
+    if action in ("intrude", "flood"):
+        if not (params[0] >= 1.0 and params[1] > 0):
+            raise FaultSpecError(spec, "HZ must be at least 1 and DURATION positive")
+        return ProcessFault(target, action, at, params[1], tuple(params))
+    if action == "bounce":
+        if not params[0] > 0:
+            raise FaultSpecError(spec, "DOWN must be positive")
+        return ProcessFault(target, action, at, params[0], tuple(params))
+    return ProcessFault(target, action, at)
 
 
 def _check_restarts(plan: FaultPlan) -> None:

@@ -12,6 +12,13 @@ the demo is exactly the unimpaired one.
   are carried out by the demo's supervision loop, by PID, only on the demo's own children; a
   stopped child is always continued (SIGCONT) before the demo stops it. ``operator.estop_at``
   is an OperatorCommand with ``estop`` set that the demo's own session sends to the controller.
+* intruders and bad days (spec.py, INTRUSIONS), carried out by the demo itself, each on a
+  thread of its own so that the supervision loop keeps its times: ``robot.reboot_at`` is SIGUSR2
+  to the robot (started with ``--drive-restart AXIS,DOWN``); ``can.intruder_at`` sends
+  Set_Input_Torque frames from a CAN transport of the demo's own on the drives' bus;
+  ``operator.flood_at`` and ``operator.evict_at`` publish on the demo's operator-capable session
+  (evict replays the last command of the lease holder it heard, after 200 one-command sessions);
+  ``router.restart_at`` kills the ``--secure`` router and starts it again on its endpoint.
 
 The run's clock: t = 0 is the instant the operator was granted the lease, as the controller
 reports it (``RobotState.lease_since``, wire 1.2) — not when the demo's session first heard of
@@ -36,6 +43,7 @@ from __future__ import annotations
 import json
 import os
 import signal
+import threading
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -47,6 +55,8 @@ READY_TIMEOUT = 15.0
 POLL = 0.05                    # s, the supervision loop's period when no fault is due sooner
 SCHEDULING_TOLERANCE = 0.005   # s a fault may fire after its time (the demo's wake-up and the signal/put)
 ESTOP_OPERATOR = "fault-estop"  # operator id of the injected estop commands
+INTRUDER_NODE, INTRUDER_TORQUE = 0, 2.0   # what another CAN master asks for (N·m to node 0)
+EVICTING_SESSIONS = 200                   # one-command sessions sent before the captured command is replayed
 
 
 def add_arguments(p) -> None:
@@ -90,6 +100,13 @@ class FaultStack:
     origin_file: Path | None = None                      # where t = 0 goes for the relay and the gateway
     estop_sender: object = None                          # callable that sends an estop command, or None
     clock: object = time.monotonic                       # the monotonic clock the faults are timed on
+    bus: object = None                                   # the drives' bus (can_bus.BusSpec) for an intruder
+    router: object = None                                # the --secure stack, for router.restart_at
+    publish: object = None                               # callable(payload bytes) on the operator command key
+    captured: bytes | None = None                        # the last command of another session heard (evict)
+    listener: object = None                              # a session the console connects to (evict, plain Zenoh)
+    threads: list = field(default_factory=list)
+    intrusions: dict = field(default_factory=dict)       # action -> what it did (counts), for the report
 
     @property
     def has_estops(self) -> bool:
@@ -159,22 +176,57 @@ class FaultStack:
                 raise RuntimeError(f"the Zenoh fault relay did not come up on {self.relay_endpoint}")
 
     # ----- during the run ------------------------------------------------------
-    def attach(self, session, robot_id: str) -> None:
-        """The demo's own session: `operator.estop_at` faults are sent on it, straight to the controller."""
-        if not self.has_estops:
+    def robot_arguments(self) -> list[str]:
+        """The robot's extra arguments: what its SIGUSR2 restarts (robot.reboot_at)."""
+        for fault in self.plan.processes:
+            if fault.action == "reboot":
+                return ["--drive-restart", f"{fault.params[0]:g},{fault.params[1]:g}"]
+        return []
+
+    def console_listener(self, free_port, open_session) -> list[str]:
+        """`operator.evict_at` without a router: Zenoh peers do not forward, so the demo hears the console's
+        commands only on a session the console connects to. Opens it; returns the console's extra arguments."""
+        if not any(f.action == "evict" for f in self.plan.processes):
+            return []
+        endpoint = f"tcp/127.0.0.1:{free_port()}"
+        self.listener = open_session(listen=[endpoint])
+        return ["--zenoh-connect", endpoint]
+
+    @property
+    def needs_operator_session(self) -> bool:
+        return any(f.action in ("estop", "flood", "evict") for f in self.plan.processes)
+
+    def attach(self, session, listener, robot_id: str) -> None:
+        """The demo's own sessions: `operator.estop_at`, `flood_at` and `evict_at` publish on `session` (one that
+        may publish operator commands), straight to the controller; `evict_at` listens on `listener` (one that
+        receives them) for the lease holder's commands."""
+        if not self.needs_operator_session:
             return
         from sharedctl.protocol import keys
         from sharedctl.protocol.messages import ControlRequest, OperatorCommand
         from sharedctl.protocol.msgpack_codec import encode_message
 
+        from ..lifecycle import steady_wall
         publisher = session.declare_publisher(keys.operator_cmd_key(robot_id))
+        self.publish = publisher.put
+        if any(f.action == "evict" for f in self.plan.processes):
+            from sharedctl.protocol.msgpack_codec import decode_message
+
+            def capture(sample) -> None:          # the lease holder's (the console's), not the faults' own
+                payload = sample.payload.to_bytes()
+                try:
+                    if not decode_message(payload, expect=OperatorCommand).operator_id.startswith("fault-"):
+                        self.captured = payload
+                except Exception:  # noqa: BLE001 — whatever else is on the key is not worth capturing
+                    pass
+            self.threads.append(listener.declare_subscriber(keys.operator_cmd_key(robot_id), capture))
         session_id = f"estop-{os.getpid()}"
         seq = iter(range(1, 1 << 30))
         zeros = (0.0, 0.0, 0.0)
 
         def send() -> None:
             publisher.put(encode_message(OperatorCommand(
-                operator_id=ESTOP_OPERATOR, session_id=session_id, seq=next(seq), send_time=time.time(),
+                operator_id=ESTOP_OPERATOR, session_id=session_id, seq=next(seq), send_time=steady_wall(),
                 joystick=zeros, q_d=zeros, qd_d=zeros, qdd_d=zeros, deadman=False, estop=True,
                 control_request=ControlRequest.NONE)))
         self.estop_sender = send
@@ -232,6 +284,9 @@ class FaultStack:
 
     def _inject(self, inj: Injection, children: dict, restart) -> None:
         name, action = inj.fault.target, inj.fault.action
+        if action in ("intrude", "flood", "evict", "bounce", "reboot"):
+            self._intrude(inj, children)
+            return
         if action == "estop":
             if self.estop_sender is None:
                 inj.skipped = "no session to send the estop on"
@@ -264,6 +319,83 @@ class FaultStack:
             os.kill(child.popen.pid, signal.SIGSTOP)
             self.stopped[name] = (child, inj)
 
+    def _intrude(self, inj: Injection, children: dict) -> None:
+        """An intrusion (spec.INTRUSIONS): a signal now, or a thread of its own for what takes time."""
+        fault = inj.fault
+        if fault.action == "reboot":
+            robot = children.get("robot")
+            if robot is None or robot.popen.poll() is not None:
+                inj.skipped = "not running"
+                return
+            inj.done_at, inj.pid = self._clock(), robot.popen.pid
+            robot.popen.send_signal(signal.SIGUSR2)
+            return
+        work = {"intrude": self._foreign_master, "flood": self._flood, "evict": self._evict,
+                "bounce": self._bounce_router}[fault.action]
+        needs = {"intrude": self.bus, "flood": self.publish, "evict": self.publish, "bounce": self.router}
+        if needs[fault.action] is None:
+            inj.skipped = {"intrude": "no CAN bus to join", "bounce": "no router (needs --secure)"}.get(
+                fault.action, "no session to publish on")
+            return
+        inj.done_at = self._clock()
+        thread = threading.Thread(target=work, args=(fault,), name=f"fault-{fault.action}", daemon=True)
+        thread.start()
+        self.threads.append(thread)
+
+    def _foreign_master(self, fault: ProcessFault) -> None:
+        from sharedctl.protocol import cansimple as cs
+
+        from ..can_bus import open_transport
+        transport = open_transport(self.bus)
+        sent = 0
+        try:
+            arbitration_id, data = cs.torque_frame(INTRUDER_NODE, INTRUDER_TORQUE)
+            end = time.monotonic() + fault.duration
+            while time.monotonic() < end:
+                transport.send(arbitration_id, False, len(data), data)
+                sent += 1
+                time.sleep(1.0 / fault.hz)
+        finally:
+            transport.shutdown()
+        self.intrusions["intrude"] = {"frames": sent, "node": INTRUDER_NODE, "torque_nm": INTRUDER_TORQUE}
+
+    def _operator_commands(self, session_id: str, first_seq: int = 1, **fields):
+        from sharedctl.protocol.messages import ControlRequest, OperatorCommand
+        from sharedctl.protocol.msgpack_codec import encode_message
+
+        from ..lifecycle import steady_wall
+        seq = first_seq
+        while True:
+            yield encode_message(OperatorCommand(
+                operator_id=f"fault-{session_id}", session_id=session_id, seq=seq, send_time=steady_wall(),
+                joystick=fields.get("joystick", (0.0, 0.0, 0.0)), q_d=fields["q_d"], qd_d=(0.0, 0.0, 0.0),
+                qdd_d=(0.0, 0.0, 0.0), deadman=fields.get("deadman", False), estop=False,
+                control_request=ControlRequest.NONE))
+            seq += 1
+
+    def _flood(self, fault: ProcessFault) -> None:
+        """A session that never held the lease, full deflection, at HZ for DURATION."""
+        commands = self._operator_commands(f"flood{os.getpid()}", joystick=(1.0, 1.0, 1.0), deadman=True,
+                                           q_d=(0.0, 0.0, 0.0))
+        sent, end = 0, time.monotonic() + fault.duration
+        while time.monotonic() < end:
+            self.publish(next(commands))
+            sent += 1
+            time.sleep(1.0 / fault.hz)
+        self.intrusions["flood"] = {"commands": sent, "rate_hz": fault.hz}
+
+    def _evict(self, fault: ProcessFault) -> None:
+        """200 sessions of one command each, then the holder's last command as it was captured."""
+        captured = self.captured
+        for k in range(EVICTING_SESSIONS):
+            self.publish(next(self._operator_commands(f"evict{os.getpid()}x{k}", q_d=(0.0, 0.0, 0.0))))
+        if captured is not None:
+            self.publish(captured)
+        self.intrusions["evict"] = {"sessions": EVICTING_SESSIONS, "replayed": captured is not None}
+
+    def _bounce_router(self, fault: ProcessFault) -> None:
+        self.intrusions["bounce"] = self.router.bounce(fault.duration)
+
     def _record_killed(self, name: str, child) -> None:
         child.exit_code = child.popen.returncode
         child.stop_seconds = 0.0
@@ -285,13 +417,20 @@ class FaultStack:
     # ----- after the run ---------------------------------------------------------
     def stop(self) -> None:
         self.continue_all()
+        for thread in self.threads:
+            if isinstance(thread, threading.Thread):
+                thread.join(timeout=10.0)
+            else:
+                thread.undeclare()           # the evict fault's subscriber
         for child in self.infra.values():
             child.stop(5.0)
+        if self.listener is not None:
+            self.listener.close()
 
     def report(self) -> dict:
         out: dict = {"seed": self.plan.seed, "armed_at": self.armed_at, "scheduling_tolerance": SCHEDULING_TOLERANCE,
                      "processes": [inj.report() for inj in self.injections],
-                     "killed": self.killed_reports}
+                     "killed": self.killed_reports, "intrusions": dict(self.intrusions)}
         for name, path in self.stats_files.items():
             try:
                 stats = json.loads(Path(path).read_text())

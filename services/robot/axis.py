@@ -25,6 +25,9 @@ Behaviour (what the controller daemon can rely on):
   reason is kept until the next successful arm, as on ODrive 0.6.
 * Polls (RTR) of every Get_* frame are answered with the current values; the heartbeat and the
   encoder estimates are also sent cyclically by the caller (`heartbeat()`, `encoder_estimates()`).
+* `restart()`: what a drive that lost power or reset comes back as — IDLE, no errors, ODrive's
+  default modes, torque 0, watchdog fed, and its incremental encoder counting from 0 where the
+  wheel stands (the caller keeps it silent for the boot).
 
 Motor model: iq = τ / k_t with k_t = 0.5 N·m/A (a direct-drive hub motor); DC bus 24 V; bus
 current = mechanical power τ·ω / 24 V (no losses, negative when the wheel is braking).
@@ -75,6 +78,8 @@ class Axis:
         self.watchdog_trips = 0
         self.pos_turns = 0.0                     # encoder feedback, set by the caller
         self.vel_turns_s = 0.0
+        self.origin = 0.0                        # turns of the wheel where the encoder reads 0 (`restart`)
+        self.restarts = 0
 
     # ----- state -----------------------------------------------------------------
     @property
@@ -88,8 +93,25 @@ class Axis:
 
     def set_feedback(self, pos_turns: float, vel_turns_s: float) -> None:
         """Encoder position (turns) and velocity (turns/s) of the wheel, from the plant."""
-        self.pos_turns = pos_turns
+        self.pos_turns = pos_turns - self.origin
         self.vel_turns_s = vel_turns_s
+
+    def power_off(self) -> None:
+        """The drive loses power: disarmed (its brake engages), torque 0; `restart` brings it back."""
+        self._disarm()
+
+    def restart(self, wheel_turns: float, now: float) -> None:
+        """Back from a reset with the wheel at `wheel_turns`: see the module doc."""
+        self.state, self.errors, self.disarm_reason = AxisState.IDLE, ODriveError.NONE, ODriveError.NONE
+        self.control_mode, self.input_mode = ControlMode.POSITION_CONTROL, InputMode.PASSTHROUGH
+        self.procedure_result = ProcedureResult.SUCCESS
+        self.input_torque = self.input_vel = 0.0
+        self.velocity_limit = math.inf
+        self.current_limit = self.config.torque_limit / self.config.torque_constant
+        self.last_feed = now
+        self.origin = wheel_turns
+        self.pos_turns = 0.0
+        self.restarts += 1
 
     def torque_target(self) -> float:
         """The torque the controller asks for (N·m): the setpoint in torque mode when armed, else 0."""

@@ -2,17 +2,20 @@
 
     sharedctl robot [--scenario FILE|NAME] [--can-interface I --can-channel C --can-option k=v ...]
                     [--zenoh-listen EP | --zenoh-connect EP] [--robot-id ID] [--duration S]
-                    [--spin-us 100] [--cpu N] [--json OUT]
+                    [--spin-us 100] [--cpu N] [--drive-restart AXIS,DOWN] [--json OUT]
 
 Speaks CANSimple on the CAN bus (services/can_bus.py picks vcan0 or host-local udp_multicast),
 publishes GroundTruth on `sharedctl/v1/<robot>/truth` (100 Hz) and a liveliness token on
 `sharedctl/v1/<robot>/alive/robot`. `[robot_sim]` in the scenario overrides the simulation
-defaults (see plant.RobotSimConfig). SIGINT/SIGTERM: stops within 2 s, exit 0, with a summary line
+defaults (see plant.RobotSimConfig). SIGUSR2 restarts drive AXIS of `--drive-restart` (default 1,0.5):
+silent for DOWN s, then back IDLE, without errors, its encoder counting from 0 (Axis.restart; the
+fault `robot.reboot_at`). SIGINT/SIGTERM: stops within 2 s, exit 0, with a summary line
 for people and, with `--json OUT`, the summary as JSON (`summary`): what another module reads.
 """
 from __future__ import annotations
 
 import os
+import signal
 import sys
 
 import zenoh
@@ -55,6 +58,9 @@ def add_parser(subparsers) -> None:
     p.add_argument("--cpu", type=int, metavar="N", help="run the whole process on CPU N (default: no pinning)")
     p.add_argument("--json", metavar="OUT", help="at exit, write the summary (physics steps, missed ticks, frames, "
                                                  "watchdog trips, …) as JSON to OUT")
+    p.add_argument("--drive-restart", default="1,0.5", metavar="AXIS,DOWN",
+                   help="what SIGUSR2 does: drive AXIS (0, 1, 2) loses power for DOWN s and comes back as a drive "
+                        "that booted (default 1,0.5)")
     add_service_config_argument(p)
     p.set_defaults(handler=run)
 
@@ -85,6 +91,9 @@ def run(args) -> int:
         if not listen and not connect and not args.zenoh_config:
             listen = [zenoh_session.DEFAULT_ENDPOINT]
         zenoh_config.check_session_args(args.zenoh_config, listen, connect)  # loopback only
+        axis, down = (float(v) for v in args.drive_restart.split(","))
+        if axis not in (0.0, 1.0, 2.0) or not down > 0:
+            raise ValueError("--drive-restart: AXIS must be 0, 1 or 2 and DOWN positive")
     except (ScenarioError, RobotSimConfigError, KeyExprError, ValueError) as exc:
         return _fail(str(exc))
     if args.duration is not None and not args.duration > 0:
@@ -111,6 +120,8 @@ def run(args) -> int:
     process = None
     try:
         process = RobotProcess(sim, bus, session, robot_id)
+        process.drive_restart = (int(axis), down)
+        signal.signal(signal.SIGUSR2, lambda *_: process.request_drive_restart())
         c = sim.config
         endpoint = f"listen {listen[0]}" if listen else f"connect {connect[0]}" if connect else args.zenoh_config
         print(f"{PROG}: {robot_id} on CAN {spec.describe()}, Zenoh {endpoint}; physics {c.physics_rate_hz:g} Hz, "
@@ -140,5 +151,5 @@ def summary(process: RobotProcess, cpu: CpuMeter) -> dict:
             "frames_in": counts["frames_in"], "frames_out": counts["frames_out"], "bad_frames": counts["bad_frames"],
             "echoes_skipped": counts["echoes"], "other_nodes": counts["other_nodes"],
             "error_frames": counts["error_frames"], "send_errors": counts["send_errors"],
-            "truth_messages": process.truth_seq,
+            "truth_messages": process.truth_seq, "drive_restarts": sum(a.restarts for a in process.sim.axes),
             "cpu_percent": 100.0 * cpu.fraction()}

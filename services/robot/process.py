@@ -70,6 +70,8 @@ class RobotProcess:
         self.truth_publisher = session.declare_publisher(keys.truth_key(robot_id)) if session else None
         self.alive_publisher = session.declare_publisher(keys.alive_key(robot_id, ROLE)) if session else None
         self.token = session.liveliness().declare_token(keys.alive_key(robot_id, ROLE)) if session else None
+        self.drive_restart = (1, 0.5)                       # (axis, s silent) a restart request means
+        self._restart_requested = False
         self.clock_start = time.monotonic()                 # `now` = monotonic − clock_start
         self.wall_minus_monotonic = time.time() - time.monotonic()
 
@@ -156,6 +158,9 @@ class RobotProcess:
             now = clock.elapsed()
             if duration is not None and now >= duration:
                 break
+            if self._restart_requested:
+                self._restart_requested = False
+                self.sim.restart_drive(*self.drive_restart, now)
             self.receive_pending(now)
             for frame in self.sim.advance(now):
                 self.send(frame)
@@ -166,6 +171,10 @@ class RobotProcess:
                 next_heartbeat = now + 1.0
             clock.wait()
         self.counts["missed_ticks"] = clock.missed
+
+    def request_drive_restart(self) -> None:
+        """From a signal handler: the loop restarts `drive_restart`'s drive at its next tick."""
+        self._restart_requested = True
 
     def close(self) -> None:
         """Undeclare the liveliness token and publishers (the caller closes session and bus)."""

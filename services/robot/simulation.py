@@ -45,7 +45,15 @@ class RobotSimulation:
         self.heartbeat_schedule = Schedule(config.heartbeat_rate_hz)
         self.encoder_schedule = Schedule(config.encoder_rate_hz)
         self.truth_schedule = Schedule(config.truth_rate_hz)
+        self.down_until: dict[int, float] = {}   # axis index → when a drive that is restarting is back
         self._update_feedback()
+
+    def restart_drive(self, index: int, down: float, now: float) -> None:
+        """Drive `index` loses power at `now`: disarmed (its brake engages), deaf and silent for `down` s, then
+        back as a drive that booted (`Axis.restart`: IDLE, no errors, its encoder counting from 0)."""
+        axis = self.axes[index]
+        axis.power_off()
+        self.down_until[index] = now + down
 
     @property
     def watchdog_trips(self) -> int:
@@ -54,7 +62,7 @@ class RobotSimulation:
     def receive(self, frame: object, now: float) -> list:
         """A decoded host → drive frame at time `now`; returns the reply frames (RTR polls)."""
         axis = self.by_node.get(getattr(frame, "node_id", None))
-        if axis is None:
+        if axis is None or self.axes.index(axis) in self.down_until:
             return []
         axis.tick(now)  # an expired watchdog trips before a late command can revive it
         return axis.handle(frame, now)
@@ -78,11 +86,17 @@ class RobotSimulation:
             self.steps += 1
             steps += 1
             self._update_feedback()
+        for index, until in list(self.down_until.items()):
+            if now >= until:
+                del self.down_until[index]
+                self.axes[index].restart(float(self.state.wheel_turns[index]), now)
+                self._update_feedback()
+        live = [axis for j, axis in enumerate(self.axes) if j not in self.down_until]
         frames = []
         if self.heartbeat_schedule.due(now):
-            frames += [axis.heartbeat() for axis in self.axes]
+            frames += [axis.heartbeat() for axis in live]
         if self.encoder_schedule.due(now):
-            frames += [axis.encoder_estimates() for axis in self.axes]
+            frames += [axis.encoder_estimates() for axis in live]
         return frames
 
     def truth_due(self, now: float) -> bool:

@@ -20,6 +20,12 @@ With ``--secure``:
       console     client   role operator     (OperatorCommand, lease queries)
       demo        client   role observer     (subscribes only)
 
+With ``--fault``: every fault but the Zenoh link faults (``operator.*``/``telemetry.*``
+impairments, whose relay is a plain peer between console and controller). Faults that publish
+operator commands (``operator.estop_at``, ``flood_at``, ``evict_at``) do so on a session of the
+operator role (`operator_session`); ``router.restart_at`` kills the router and starts it again
+on its endpoint (`bounce`): the clients reconnect by themselves.
+
 What the summary adds (``security``): the endpoint, what was enforced, the router's exit, and
 ``rejected_messages`` — operator messages the controller refused (the last RobotState's
 `link.rejected_messages`). Messages the router's ACL dropped are not counted: Zenoh 1.10 drops
@@ -52,10 +58,10 @@ def add_arguments(p) -> None:
                         "a client with its role's credentials (--zenoh-listen: the router's endpoint, tcp/ or tls/)")
 
 
-def _start_router(argv: list[str], log_dir: Path) -> Child:
+def _start_router(argv: list[str], log_dir: Path, name: str = "router") -> Child:
     """The router module alone (`sharedctl router` without importing every other sub-command: it is
-    up seconds sooner on a busy host), in its own session, output to log_dir/router.log."""
-    log = log_dir / "router.log"
+    up seconds sooner on a busy host), in its own session, output to log_dir/NAME.log."""
+    log = log_dir / f"{name}.log"
     with open(log, "wb") as out:
         popen = subprocess.Popen([sys.executable, "-m", "sharedctl.services.security.router_command", *argv],
                                  env=dict(os.environ, PYTHONUNBUFFERED="1"), stdin=subprocess.DEVNULL, stdout=out,
@@ -72,14 +78,22 @@ class SecureStack:
     configs: dict = field(default_factory=dict)       # role (and "router") -> Path
     router: object | None = None                      # children.Child
     session: object | None = None                     # the observer's zenoh.Session (the demo closes it)
+    operator: object | None = None                    # an operator-role session for the faults that publish
+    log_dir: Path | None = None
+    backstop: str = ""
+    bounced: list = field(default_factory=list)       # routers killed on purpose (router.restart_at)
 
     @classmethod
-    def from_args(cls, args, free_port) -> "SecureStack":
+    def from_args(cls, args, free_port, faults=None) -> "SecureStack":
         """Inert without --secure; raises ValueError on a bad endpoint or an unsupported combination."""
+        bounces = faults is not None and any(f.action == "bounce" for f in faults.plan.processes)
         if not getattr(args, "secure", False):
+            if bounces:
+                raise ValueError("router.restart_at needs --secure (without it there is no router)")
             return cls()
-        if getattr(args, "fault", None):
-            raise ValueError("--secure with --fault is not supported (the fault relay is a plain peer)")
+        if faults is not None and faults.needs_relay:
+            raise ValueError("--secure with operator.*/telemetry.* link faults is not supported (their relay is a "
+                             "plain peer between console and controller); every other fault is")
         endpoint = check_endpoint(args.zenoh_listen) if args.zenoh_listen else f"tls/127.0.0.1:{free_port()}"
         return cls(enabled=True, endpoint=endpoint)
 
@@ -95,10 +109,30 @@ class SecureStack:
         for role in ROLES:
             self.configs[role] = write_config(self.directory / f"{role}.json5",
                                               client_config(role, self.creds, [self.endpoint]), f"demo {role}")
+        self.log_dir, self.backstop, self.wait_listening = log_dir, backstop, wait_listening
         self.router = _start_router(["--config", str(self.configs["router"]), "--duration", backstop], log_dir)
         if not wait_listening(self.endpoint, self.router, READY_TIMEOUT):
             raise RuntimeError(f"router did not come up on {self.endpoint}")
         self.session = open_from_file(self.configs["observer"])
+
+    def operator_session(self):
+        """A session of the operator role (opened once), for the faults that publish operator commands."""
+        if self.operator is None:
+            self.operator = open_from_file(self.configs["operator"])
+        return self.operator
+
+    def bounce(self, down: float) -> dict:
+        """router.restart_at: SIGKILL the router, wait `down` s, start it again on its endpoint."""
+        old = self.router
+        old.popen.kill()
+        old.popen.wait()
+        old.exit_code, old.stop_seconds = old.popen.returncode, 0.0
+        self.bounced.append(old)
+        time.sleep(down)
+        self.router = _start_router(["--config", str(self.configs["router"]), "--duration", self.backstop],
+                                    self.log_dir, f"router.{len(self.bounced)}")
+        back = self.wait_listening(self.endpoint, self.router, READY_TIMEOUT)
+        return {"down_s": down, "back_listening": back, "killed_pid": old.popen.pid, "pid": self.router.popen.pid}
 
     def zenoh_args(self, role: str, plain: list[str]) -> list[str]:
         """A child's Zenoh arguments: its role's configuration file, or `plain` when not secure."""
@@ -126,6 +160,8 @@ class SecureStack:
         """Stop the router (after every client is gone) and remove the credentials."""
         if self.session is not None and not self.session.is_closed():
             self.session.close()     # the demo closes it, unless the run failed before using it
+        if self.operator is not None and not self.operator.is_closed():
+            self.operator.close()
         if self.router is not None:
             self.router.stop()
         if self.directory is not None:
@@ -151,6 +187,7 @@ class SecureStack:
                 "access_control": "default deny; per-role rules (services/security/roles.py)",
                 "roles": {"robot": "robot", "controller": "controller", "console": "operator", "demo": "observer"},
                 "router": self.router.report() if self.router is not None else None,
+                "routers_killed_on_purpose": [r.report() for r in self.bounced],
                 "acl_denials_counted": False,
                 "undecodable_at_demo": rec.rejected,
                 "credentials_removed": self.directory is not None and not self.directory.exists(),

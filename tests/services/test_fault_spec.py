@@ -95,3 +95,27 @@ def test_a_key_given_twice_is_refused_but_windows_add_up():
     with pytest.raises(FaultSpecError, match="twice"):
         parse(["operator.loss=0.1", "operator.loss=0.2"])
     assert len(parse(["can.busoff=1,1", "can.busoff=3,1"]).links["can"].blackouts) == 2
+
+
+def test_intrusions_are_timed_faults_with_their_defaults_and_describe_themselves_back():
+    plan = parse(["robot.reboot_at=2", "can.intruder_at=1.5,500", "operator.flood_at=1", "operator.evict_at=3",
+                  "router.restart_at=2,0.5"])
+    got = {(f.target, f.action): (f.at, f.duration, f.params) for f in plan.processes}
+    assert got == {("robot", "reboot"): (2.0, 0.5, (1.0, 0.5)), ("can", "intrude"): (1.5, 0.5, (500.0, 0.5)),
+                   ("operator", "flood"): (1.0, 1.0, (2000.0, 1.0)), ("operator", "evict"): (3.0, 0.0, ()),
+                   ("router", "bounce"): (2.0, 0.5, (0.5,))}
+    assert [parse([f.describe()]).processes[0] for f in plan.processes] == plan.processes
+    assert not plan.has("can") and not plan.has("operator")       # no gateway, no relay
+
+
+@pytest.mark.parametrize("specs, names", [
+    (["robot.reboot_at=2,3"], "AXIS"),
+    (["can.intruder_at=1,0.5"], "HZ"),
+    (["operator.flood_at=1,100,0"], "DURATION"),
+    (["router.restart_at=1,0"], "DOWN"),
+    (["can.intruder_at=1", "can.loss=0.1"], "gateway"),
+])
+def test_a_bad_intrusion_is_a_typed_error_naming_it(specs, names):
+    with pytest.raises(FaultSpecError) as err:
+        parse(specs)
+    assert names in str(err.value)

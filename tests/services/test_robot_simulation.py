@@ -111,3 +111,22 @@ def test_a_cyclic_schedule_fires_once_per_period_and_never_in_a_burst_after_a_st
     fired = [t for t in (0.0, 0.001, 0.018, 0.019, 0.0195, 0.020, 0.021, 0.030, 0.031) if late.due(t)]
     assert fired == [0.0, 0.018, 0.020, 0.030]
     assert all(fired[j] - fired[i] > (j - i - 1) * 0.01 for i in range(len(fired)) for j in range(i + 1, len(fired)))
+
+
+def test_a_drive_that_restarts_goes_silent_then_comes_back_idle_without_errors_counting_from_zero():
+    sim = simulation()
+    arm(sim, 0.0)
+    run(sim, 0.0, 0.2, torque=1.0)                                 # the wheels turned
+    sim.receive(cs.Estop(1), 0.2)
+    turns = float(sim.state.wheel_turns[1])
+    assert abs(turns) > 0.01 and sim.axes[1].errors == ODriveError.ESTOP_REQUESTED
+    sim.restart_drive(1, 0.3, 0.2)
+    silent = run(sim, 0.2, 0.29)
+    assert silent and not any(getattr(f, "node_id", None) == 1 for f in silent)   # nothing from it while down
+    assert sim.receive(cs.SetAxisState(1, AxisState.CLOSED_LOOP_CONTROL), 0.3) == [] and not sim.axes[1].armed
+    back = run(sim, 0.49, 0.05)
+    beats = [f for f in back if isinstance(f, cs.Heartbeat) and f.node_id == 1]
+    estimates = [f for f in back if isinstance(f, cs.GetEncoderEstimates) and f.node_id == 1]
+    assert beats and beats[0].axis_state is AxisState.IDLE and beats[0].axis_error == ODriveError.NONE
+    assert estimates and abs(estimates[0].pos_estimate) < 0.01    # a new origin where the wheel stands
+    assert sim.axes[1].restarts == 1 and sim.axes[1].control_mode is ControlMode.POSITION_CONTROL

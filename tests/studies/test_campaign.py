@@ -5,6 +5,7 @@ from __future__ import annotations
 import copy
 import json
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -71,7 +72,9 @@ def test_full_plan_reaches_the_can_envelope_in_steps():
 
 
 def _instants(cases, key, duration=None):
+    """The instants of `key` in the sweeps: the adversarial cases with that fault alone, unsecured."""
     return sorted(c.fault_value(key)[0] for c in cases if c.scenario == cp.ADVERSARIAL and c.fault_value(key)
+                  and len(c.faults) == 1 and not c.secure
                   and (duration is None or c.fault_value(key)[1] == duration))
 
 
@@ -91,10 +94,22 @@ def test_full_plan_puts_kills_hangs_up_to_the_watchdog_and_estops_at_every_tenth
     assert math.floor((end - start) / 0.1) <= len(inside) - 1
 
 
-def test_the_quick_plan_is_unchanged_by_the_new_envelope():
+def test_the_quick_plan_is_unchanged_by_the_new_envelope_and_meets_each_intruder_once():
     ids = [c.id for c in cp.plan(quick=True)]
-    assert len(ids) == 20 and "adversarial_wall|controller.kill_at=1.9|4s" in ids
+    assert len(ids) == 24 and "adversarial_wall|controller.kill_at=1.9|4s" in ids
     assert not any("estop_at" in i or "can.delay_ms=25" in i for i in ids)
+    for key in ("controller.restart_at", "robot.reboot_at", "can.intruder_at", "operator.flood_at",
+                "operator.evict_at"):
+        assert sum(key in i for i in ids) == 1, key
+
+
+def test_the_full_plan_has_every_intruder_family_and_a_secured_stack_meeting_faults():
+    families = {c.family for c in cp.plan(quick=False)}
+    assert {"controller.kill_at+controller.restart_at", "robot.reboot_at", "can.intruder_at", "operator.flood_at",
+            "operator.evict_at", "secure:none", "secure:router.restart_at",
+            "secure:controller.kill_at+controller.restart_at", "secure:can.intruder_at"} <= families
+    secured = [c for c in cp.plan(quick=False) if c.secure]
+    assert secured and all("--secure" in cp.demo_argv(c, Path("x.json")) for c in secured)
 
 
 def test_every_planned_fault_parses_with_the_demo_parser():

@@ -123,6 +123,19 @@ def _explain_loss(what: str, fc: dict) -> str:
             f"away: the stop ends {-fc['min_margin']:.3f} m beyond it even at best (forecast from the ground truth)")
 
 
+def controller_outcome(summary: dict) -> dict | None:
+    """What the (last) controller said of the run: how it started (resumed, declared, refused), its mode at the
+    end, the other master's frames it saw, the operator messages it refused by reason; and what the
+    intrusions of the run did (the demo's counters)."""
+    controller = ((summary.get("processes") or {}).get("controller") or {}).get("summary")
+    if not controller:
+        return None
+    return {"start": controller.get("start"), "mode": controller.get("mode"),
+            "arming_refused": controller.get("arming_refused"),
+            "foreign_commands": controller.get("foreign_commands"), "rejections": controller.get("rejections"),
+            "intrusions": (summary.get("injected") or {}).get("intrusions") or {}}
+
+
 def judge(case, result: RunResult, forecasts=None) -> dict:
     """One row of the campaign: ground-truth verdict, the forecasts of what the run's faults force, and
     whether a violation is one a forecast says must happen (`documented`)."""
@@ -198,6 +211,7 @@ def judge(case, result: RunResult, forecasts=None) -> dict:
         "wall_seconds": round(result.wall_seconds, 2), "error": result.error, "summary_file": result.summary_file,
         "host": host, "overloaded": overloaded(host),
         "forecast": forecast, "estop_forecast": estop_forecast, "delay_forecast": delayed, "explained": explained,
+        "controller_outcome": controller_outcome(s),
         "documented": violations == 0 or explained is not None,
     }
 

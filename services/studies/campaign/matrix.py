@@ -7,7 +7,12 @@ on the simulator's ground truth (judge.py), aggregated into one result.
   with 20 % loss), and on the adversarial wall a controller kill, a controller hang of T_w/2, of
   T_w less five periods (the controller resumes before the drives' watchdog) and of T_w (it does
   not), and an operator's estop at every 0.1 s of the approach to the wall (APPROACH), longer
-  hangs, console and robot kills; the paper scenario samples each family.
+  hangs, console and robot kills; intruders and bad days (docs/security.md): a controller killed
+  and restarted (it must resume disarmed), a drive that restarts, another CAN master, a command
+  flood, a replay after a flood of sessions, and — behind the `--secure` router — the router
+  restarted and the other faults met by the secured stack; the paper scenario samples each family.
+  A step of the wall clock is not a family: it would step the host's clock under every other
+  process; its mitigation takes the wall clock out of the decision (tests/services).
 * `demo_argv(case, json_out, log_dir)` — the command line of one run.
 * `run_campaign(cases, runner, …)` — runs them one after another (`runner(case) -> RunResult`;
   `subprocess_runner` in production, a fake in the tests) and judges each (judge.py).
@@ -33,7 +38,8 @@ ADVERSARIAL, PAPER = "adversarial_wall", "paper_convex"
 DURATION = 5.0                   # s of every run unless the case says otherwise
 RUN_TIMEOUT_MARGIN = 90.0        # s on top of the duration before a run is stopped
 ACTUATION_LOSS = ("controller.kill_at", "controller.stop_at", "can.busoff", "operator.estop_at")
-TIMED = ("kill_at", "stop_at", "estop_at", ".busoff", ".blackout")
+TIMED = ("kill_at", "stop_at", "estop_at", ".busoff", ".blackout", "reboot_at", "intruder_at", "flood_at",
+         "evict_at", "restart_at")
 # The adversarial wall's approach, on the run's clock (s): from the instant the wall becomes the nearest
 # face, the robot at 1.0 m/s (1.45 s in the sampled loop on the robot's plant), past its rest at the band
 # (2.73 s), with the face within the stopping distance from the peak approach speed, D(1.28 m/s) = 0.40 m,
@@ -49,19 +55,20 @@ class Case:
     duration: float = DURATION
     controller: str | None = None
     repeat: int = 0                  # a second run of the same case (the baseline's spread)
+    secure: bool = False             # behind the --secure router (usrpwd, mTLS, ACL)
 
     @property
     def id(self) -> str:
         law = f"[{self.controller}]" if self.controller else ""
         again = f"#{self.repeat + 1}" if self.repeat else ""
-        return f"{self.scenario}{law}|{' '.join(self.faults) or 'none'}|{self.duration:g}s{again}"
+        secure = "[secure]" if self.secure else ""
+        return f"{self.scenario}{law}{secure}|{' '.join(self.faults) or 'none'}|{self.duration:g}s{again}"
 
     @property
     def family(self) -> str:
         keys = sorted({f.split("=", 1)[0] for f in self.faults if not f.startswith("seed=")})
-        if not keys:
-            return "none"
-        return "+".join(keys)
+        name = "+".join(keys) if keys else "none"
+        return f"secure:{name}" if self.secure else name
 
     def fault_value(self, key: str) -> list[float] | None:
         """The numbers of fault `key` (e.g. controller.stop_at → [SEC, DURATION]), None if absent."""
@@ -118,8 +125,8 @@ class Case:
 
 
 # ----- the matrix ------------------------------------------------------------------------
-def _cases(scenario, faults_list, duration=DURATION, controller=None):
-    return [Case(scenario, tuple(f), duration, controller) for f in faults_list]
+def _cases(scenario, faults_list, duration=DURATION, controller=None, secure=False):
+    return [Case(scenario, tuple(f), duration, controller, secure=secure) for f in faults_list]
 
 
 def plan(quick: bool = False) -> list[Case]:
@@ -144,6 +151,9 @@ def plan(quick: bool = False) -> list[Case]:
         add("process", _cases(A, [["controller.kill_at=1.9"], ["controller.kill_at=0.5"], ["controller.stop_at=3,0.5"],
                                   ["console.kill_at=1"], ["robot.kill_at=3"]], q)
             + _cases(P, [["controller.stop_at=2,0.05"]], q))
+        add("intruders", _cases(A, [["controller.kill_at=1.9", "controller.restart_at=2.9"], ["robot.reboot_at=2.2"],
+                                    ["can.intruder_at=2.2"], ["operator.flood_at=1,2000,1", "operator.evict_at=2.5"]],
+                                q))
         return _interleave(families)
 
     delays = (0, 100, 200, 300, 500, 750, 1000)
@@ -202,6 +212,24 @@ def plan(quick: bool = False) -> list[Case]:
         + _cases(P, [[f"console.kill_at={t:g}"] for t in (1.0, 3.0)]))
     add("robot-kill", _cases(A, [["robot.kill_at=1.0"], ["robot.kill_at=2.0"], ["robot.kill_at=3.0"]])
         + _cases(P, [["robot.kill_at=2.0"]]))
+    # intruders and bad days (docs/security.md): the restarted controller must resume disarmed and stay so (the
+    # scripted operator never takes control again); the rest must change nothing or end in a stop inside
+    add("controller-restart", _cases(A, [[f"controller.kill_at={t:g}", f"controller.restart_at={t + 1:g}"]
+                                         for t in (0.5, 1.5, 2.0, 2.3, 2.6, 3.0)], 6.0)
+        + _cases(P, [["controller.kill_at=2.5", "controller.restart_at=3.5"]], 6.0))
+    add("drive-reboot", _cases(A, [[f"robot.reboot_at={t:g},{axis}"] for t, axis in
+                                   ((0.5, 0), (1.5, 1), (2.2, 2), (2.6, 1), (3.0, 0), (3.5, 1))])
+        + _cases(A, [["robot.reboot_at=2.2,1,2"]]) + _cases(P, [["robot.reboot_at=2.5"]]))
+    add("can-intruder", _cases(A, [[f"can.intruder_at={t:g}"] for t in (1.0, 2.0, 2.4, 2.8)]
+                               + [["can.intruder_at=2.2,1000,2"]]) + _cases(P, [["can.intruder_at=2"]]))
+    add("operator-flood", _cases(A, [["operator.flood_at=1,2000,2"], ["operator.flood_at=2.2,5000,1"]])
+        + _cases(P, [["operator.flood_at=1,2000,2"]]))
+    add("replay-eviction", _cases(A, [["operator.evict_at=1.5"], ["operator.evict_at=2.5"]])
+        + _cases(P, [["operator.evict_at=2"]]))
+    add("secure", _cases(A, [(), ["router.restart_at=1.5"], ["router.restart_at=2.5,2"],
+                             ["controller.kill_at=2.3", "controller.restart_at=3.3"], ["can.intruder_at=2.2"],
+                             ["operator.estop_at=2.4"], ["can.delay_ms=10", "can.loss=0.1"]], secure=True)
+        + _cases(P, [["router.restart_at=2"]], secure=True))
     add("combined", _cases(A, [["operator.delay_ms=300", "can.loss=0.05"], ["operator.loss=0.5", "can.delay_ms=5"],
                                ["operator.burst=0.2,0.2", "telemetry.delay_ms=300", "can.loss=0.05"],
                                ["operator.delay_ms=500", "console.kill_at=3.0"]])
@@ -234,6 +262,8 @@ def validate(cases: list[Case], parse) -> dict[str, str]:
 def demo_argv(case: Case, json_out: Path, log_dir: Path | None = None) -> list[str]:
     argv = [sys.executable, "-m", "sharedctl.services.cli", "demo", "--scenario", case.scenario,
             "--duration", f"{case.duration:g}", "--headless", "--no-reference", "--json", str(json_out)]
+    if case.secure:
+        argv.append("--secure")
     if case.controller:
         argv += ["--controller", case.controller]
     if log_dir is not None:

@@ -115,6 +115,7 @@ def markdown(result: dict, plots: list[str], title: str = "Fault campaign") -> s
     for fam, f in sorted(result["families"].items()):
         lines.append(f"| `{fam}` | {f['runs']} | {f['violating_runs']} | {f['estop_runs']} | "
                      f"{f.get('not_exercised', 0)} | {f['errors']} | {_fmt(f['min_margin'])} |")
+    lines += _intruders(rows)
     bad = [r for r in rows if r["violations"]]
     lines += ["", "## Violations", ""]
     if not bad:
@@ -142,6 +143,34 @@ def markdown(result: dict, plots: list[str], title: str = "Fault campaign") -> s
                      f"{_fmt(fc)} | {_missed(r)} | {_injected(r)} | {_fmt(r['wall_seconds'], 1)} |")
     lines.append("")
     return "\n".join(lines)
+
+
+INTRUSION_KEYS = ("restart_at", "reboot_at", "intruder_at", "flood_at", "evict_at")
+
+
+def _intruders(rows: list[dict]) -> list[str]:
+    """Restarts, drive reboots, other CAN masters, floods, replays and the secured stack: what the controller
+    made of each (docs/security.md)."""
+    mine = [r for r in rows if r["family"].startswith("secure:")
+            or any(f.split("=")[0].endswith(INTRUSION_KEYS) for f in r["faults"])]
+    if not mine:
+        return []
+    lines = ["", "## Intruders, restarts and bad days", "",
+             "What the (last) controller said of each run: how it started, its mode at the end, another CAN "
+             "master's frames it saw, the operator messages it refused; ground-truth outcome and margin as above.",
+             "", "| run | outcome | min margin (m) | controller start | end mode | arming refused | foreign CAN "
+             "frames | refused operator messages | intrusions |", "|---|---|---:|---|---|---|---:|---|---|"]
+    for r in mine:
+        c = r.get("controller_outcome") or {}
+        refused = ", ".join(f"{k} {v}" for k, v in sorted((c.get("rejections") or {}).items())) or "—"
+        intrusions = "; ".join(f"{k}: " + ", ".join(f"{a} {b}" for a, b in v.items())
+                               for k, v in (c.get("intrusions") or {}).items()) or "—"
+        run = (f"{r['scenario']}{' [secure]' if r['family'].startswith('secure:') else ''} "
+               + (" ".join(f"`{f}`" for f in r["faults"]) or "—"))
+        lines.append(f"| {run} | {r['outcome']} | {_fmt(r['min_margin'])} | {c.get('start') or '—'} | "
+                     f"{c.get('mode') or '—'} | {'yes' if c.get('arming_refused') else 'no'} | "
+                     f"{c.get('foreign_commands') or 0} | {refused} | {intrusions} |")
+    return lines
 
 
 def _plt():
