@@ -9,7 +9,7 @@ controller writes a checkpoint every `interval` seconds and at every Estop:
 * the pose q and the wheel encoder readings (turns) that pose was integrated up to — one
   consistent pair, taken from the odometry in the same period;
 * the adaptive estimate θ̂ (so the adaptation resumes where it was);
-* whether an Estop is latched, and why;
+* whether an Estop is latched, and why; whether the drives were armed;
 * when: wall time, the monotonic clock and the host's boot id (the age is taken on the monotonic
   clock when the boot is the same — a wall-clock step cannot make a checkpoint look fresh);
 * `ended`: true only in the last checkpoint of a controller stopped on purpose (SIGTERM, SIGINT,
@@ -61,6 +61,7 @@ class Checkpoint:
     boot_id: str                # the host's boot id ("" if unknown)
     seq: int                    # checkpoints written by this controller so far
     ended: bool = False         # the last checkpoint of a controller stopped on purpose
+    armed: bool = False         # the drives were armed (RUNNING) when this was written
 
     def age(self, wall: float, monotonic: float, boot_id: str) -> float:
         """s since this was written: on the monotonic clock within one boot, else on the wall clock; +inf when

@@ -454,7 +454,7 @@ class ControllerDaemon:
             robot_id=self.config.robot_id, scenario=self.config.scenario, q=tuple(q), wheel_turns=tuple(turns),
             theta_hat=tuple(float(x) for x in self.state.theta_hat), estop=self.mode is Mode.ESTOPPED,
             reason=self.estop_reason, wall=time.time(), monotonic=time.monotonic(), boot_id=self.boot_id,
-            seq=writer.written + 1, ended=ended)
+            seq=writer.written + 1, ended=ended, armed=self.mode is Mode.RUNNING)
         if ended:
             writer.close(saved)             # the last one, written before the process exits
         else:

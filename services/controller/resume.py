@@ -13,7 +13,10 @@ starts from what it can trust:
   (in-band take); a latched Estop stays latched. Trusted only if the checkpoint is this robot's and
   scenario's, whole, younger than `max_age`, and the encoders moved no more since than the wheels
   can turn in that time (`max_wheel_speed`) — otherwise the drives may have restarted and their
-  readings no longer continue the checkpoint's.
+  readings no longer continue the checkpoint's. The drives witness that too: a controller that
+  dies with them armed leaves every one of them with an error (their watchdog expires), and an
+  Estop stays on them; armed or estopped in the checkpoint and without an error now, they were
+  restarted (power cycled, replaced, a new simulation) and their encoders count from a new origin.
 * **first life** (`--pose checkpoint` with no checkpoint, or the last one ended on purpose): the
   scenario's start pose — provided no drive reports an error at start. An error (a watchdog that
   expired, an Estop) says a controller was driving them, and with no checkpoint of it the pose is
@@ -81,6 +84,13 @@ def decide(pose_source: str, checkpoint: Checkpoint | CheckpointError | None, *,
     if age is None or not age <= max_age:
         return _refuse(q0, turns, f"the checkpoint is {age:.1f} s old (at most {max_age:g} s): the robot may have "
                                   "been moved or its drives restarted since")
+    if (checkpoint.armed or checkpoint.estop) and len(faulted) < len(turns):
+        clean = sorted(set(range(len(turns))) - set(faulted))
+        was = "estopped" if checkpoint.estop else "armed"
+        return _refuse(q0, turns, f"the drives were {was} when the checkpoint was written, yet drives {clean} report "
+                                  "no error now (a controller that dies leaves their watchdog expired, an Estop "
+                                  "stays on them): they restarted since, and their encoders no longer continue "
+                                  "the checkpoint's")
     limit = max_wheel_speed * age + TURNS_SLACK
     for i, (now, then) in enumerate(zip(turns, checkpoint.wheel_turns)):
         if abs(now - then) > limit:

@@ -68,7 +68,7 @@ def start(source, ck, turns=(1.1, -1.9, 0.5), errors=(0, 0, 0), age=2.0):
 def test_a_checkpoint_of_a_failed_controller_is_resumed_disarmed_until_a_take():
     s = start("checkpoint", saved())
     assert (s.action, s.q, s.wheel_turns, s.theta_hat) == ("hold", saved().q, saved().wheel_turns, saved().theta_hat)
-    latched = start("checkpoint", saved(estop=True, reason="feedback lost"))
+    latched = start("checkpoint", saved(estop=True, reason="feedback lost"), errors=(ODriveError.ESTOP_REQUESTED,) * 3)
     assert latched.action == "estop" and "feedback lost" in latched.text
     on_a_drive = start("checkpoint", saved(), errors=(0, ODriveError.ESTOP_REQUESTED, 0))   # sent after the last write
     assert on_a_drive.action == "estop" and "drives [1]" in on_a_drive.text
@@ -87,6 +87,20 @@ def test_a_checkpoint_of_a_failed_controller_is_resumed_disarmed_until_a_take():
 def test_without_a_trustworthy_pose_arming_is_refused_and_the_reason_given(ck, kwargs, why):
     s = start("checkpoint", ck, **kwargs)
     assert s.action == "refuse" and why in s.text and "--pose scenario" in s.text
+
+
+def test_drives_armed_in_the_checkpoint_without_an_error_now_were_restarted_and_the_checkpoint_is_refused():
+    """A controller that dies with the drives armed leaves their watchdogs expired. Clean drives say they were
+    restarted (power cycle, a new simulation): their encoders no longer continue the checkpoint's."""
+    armed = saved(armed=True)
+    watchdog = ODriveError.WATCHDOG_TIMER_EXPIRED
+    assert start("checkpoint", armed, errors=(watchdog, watchdog, watchdog)).action == "hold"
+    refused = start("checkpoint", armed, errors=(watchdog, 0, watchdog))
+    assert refused.action == "refuse" and "drives [1] report no error" in refused.text
+    assert start("checkpoint", saved(armed=False)).action == "hold"       # held or idle then: no witness
+    estop = ODriveError.ESTOP_REQUESTED
+    assert start("checkpoint", saved(estop=True, reason="x"), errors=(estop, estop, estop)).action == "estop"
+    assert start("checkpoint", saved(estop=True, reason="x"), errors=(0, 0, 0)).action == "refuse"
 
 
 def test_a_first_start_or_a_declared_pose_arms_at_the_scenario_pose_but_keeps_a_drives_estop():
@@ -143,11 +157,11 @@ def test_a_controller_following_a_dead_one_resumes_its_pose_and_arms_only_on_an_
     first = run_first_life(path)
     q_then = first.q.copy()
     assert math.dist(q_then, Q0) > 0.05                          # it had moved
-    # killed here: no shutdown. The robot rolled on by (0.02, 0.01, -0.01) turns before the new controller
+    # killed here: no shutdown; the drives' watchdogs expire. The robot rolled on by (0.02, 0.01, -0.01) turns
     second = daemon(path)
     second.begin()
     assert frames(second, cs.SetAxisState) == [cs.SetAxisState(n, AxisState.IDLE) for n in (0, 1, 2)]
-    feed(second, 10.001, (0.42, -0.19, 0.09))
+    feed(second, 10.001, (0.42, -0.19, 0.09), error=ODriveError.WATCHDOG_TIMER_EXPIRED)
     second.tick(10.002)
     assert second.mode is Mode.HELD
     expected, _ = first.odometry.update(second.master.estimates())   # the dead one's odometry, carried on
@@ -157,7 +171,7 @@ def test_a_controller_following_a_dead_one_resumes_its_pose_and_arms_only_on_an_
     for k in range(1, 400):
         now = 10.002 + 0.002 * k
         operator(second, k, now)
-        feed(second, now, (0.42, -0.19, 0.09))
+        feed(second, now, (0.42, -0.19, 0.09), error=ODriveError.WATCHDOG_TIMER_EXPIRED)
         second.tick(now)
     sent = second.master.bus.take()
     assert second.mode is Mode.HELD
@@ -165,7 +179,7 @@ def test_a_controller_following_a_dead_one_resumes_its_pose_and_arms_only_on_an_
     assert not any(isinstance(f, cs.SetAxisState) and f.requested_state is AxisState.CLOSED_LOOP_CONTROL for f in sent)
     assert sum(isinstance(f, cs.SetAxisState) for f in sent) >= 3 * 2     # IDLE again every 0.5 s
     operator(second, 400, 10.9, request=ControlRequest.TAKE)
-    feed(second, 10.9, (0.42, -0.19, 0.09))
+    feed(second, 10.9, (0.42, -0.19, 0.09), error=ODriveError.WATCHDOG_TIMER_EXPIRED)
     second.tick(10.9)
     assert second.mode is Mode.ARMING and cs.ClearErrors(0) in second.master.bus.take()
 
