@@ -63,9 +63,8 @@ from sharedctl.protocol.wire_types import Dims
 from sharedctl.shared_controller import HISTORY, NonFiniteCommand, SharedController
 
 from ..lifecycle import RateClock, poll_until
-from . import checkpoint as checkpoints
-from . import resume
 from .can_master import CanMaster
+from .continuity import Continuity
 from .daemon_config import DaemonConfig
 from .lease import OperatorLease
 from .loop_stats import LoopStats
@@ -128,11 +127,7 @@ class ControllerDaemon:
         self.estop_reason = ""
         self.hold_take_mark = 0
         self.last_repeat_at = -math.inf
-        self.saved = self._read_checkpoint()            # the previous controller's checkpoint (or why not)
-        self.checkpoints = (checkpoints.CheckpointWriter(config.checkpoint, config.checkpoint_interval)
-                            if config.checkpoint is not None else None)
-        self.boot_id = checkpoints.host_boot_id()
-        self.checkpoint_failures_seen = 0
+        self.continuity = Continuity(config)           # the previous life's checkpoint, this life's (continuity.py)
         self.foreign_seen = 0                           # the CAN master's foreign_commands already acted on
         self.period = 1.0 / config.rate
         self.max_delay = min(MAX_DELAY, HISTORY * self.period)   # the predictor keeps HISTORY periods of commands
@@ -211,8 +206,7 @@ class ControllerDaemon:
             "commands_accepted": self.policy.accepted, "rejections": dict(self.policy.rejections),
             "can_round_trip_ms": self.master.round_trip * 1e3, "rtt_probes": self.master.probe.counts(),
             "mode": self.mode.value, "start": self.start_text, "arming_refused": self.refusal,
-            "checkpoints_written": 0 if self.checkpoints is None else self.checkpoints.written,
-            "checkpoint_failures": 0 if self.checkpoints is None else self.checkpoints.failures})
+            **self.continuity.summary()})
 
     def warm_up(self) -> None:
         """One control step and one RobotState built and encoded, all discarded, before the clock starts.
@@ -379,14 +373,6 @@ class ControllerDaemon:
         self.emit(now, f"rearm:{kind}", kind, "info", text)
 
     # ------------------------------------------------------------------ start
-    def _read_checkpoint(self):
-        if self.config.checkpoint is None:
-            return None
-        try:
-            return checkpoints.read(self.config.checkpoint)
-        except checkpoints.CheckpointError as exc:
-            return exc
-
     def begin(self) -> None:
         """IDLE to every axis: the start (STARTING) waits to hear each one idle before anything else."""
         self.master.idle_all()
@@ -396,13 +382,8 @@ class ControllerDaemon:
     def start(self, now: float) -> None:
         """Every axis heard idle since `begin`: where the robot is and what may follow (resume.py)."""
         estimates = self.master.estimates()
-        saved = self.saved
-        age = (saved.age(time.time(), time.monotonic(), self.boot_id)
-               if isinstance(saved, checkpoints.Checkpoint) else None)
-        decision = resume.decide(
-            self.config.pose, saved, robot_id=self.config.robot_id, scenario=self.config.scenario, q0=self.q0,
-            turns=[e.pos_turns for e in estimates], errors=[self.master.axes[n].error for n in self.master.nodes],
-            age=age, max_age=self.config.checkpoint_max_age)
+        decision = self.continuity.decide(self.q0, [e.pos_turns for e in estimates],
+                                          [self.master.axes[n].error for n in self.master.nodes])
         self.odometry.resume(decision.q, decision.wheel_turns)
         self.q, self.v = self.odometry.update(estimates)
         theta = decision.theta_hat
@@ -420,10 +401,10 @@ class ControllerDaemon:
             self.master.request_arming()
             self.mode = Mode.ARMING
         elif decision.action == "estop" or self.status.estop_requested or self.master.foreign_commands:
-            reason = (saved.reason if isinstance(saved, checkpoints.Checkpoint) and saved.estop
-                      else "estop requested by the operator" if self.status.estop_requested
-                      else f"foreign CAN master: {self.master.last_foreign}" if self.master.foreign_commands
-                      else "a drive reports an Estop")
+            reason = self.continuity.saved_estop_reason or (
+                "estop requested by the operator" if self.status.estop_requested
+                else f"foreign CAN master: {self.master.last_foreign}" if self.master.foreign_commands
+                else "a drive reports an Estop")
             self.estop(now, f"latched at start: {reason}")
         else:
             self.mode = Mode.HELD
@@ -441,28 +422,15 @@ class ControllerDaemon:
     def save_checkpoint(self, now: float, force: bool = False, ended: bool = False) -> None:
         """The checkpoint (checkpoint.py), when due or forced; never before the start is decided, nor after a
         refused one (its pose is no evidence)."""
-        writer = self.checkpoints
-        if writer is None or self.mode is Mode.STARTING or self.refusal is not None:
+        if self.mode is Mode.STARTING or self.refusal is not None or not (force or self.continuity.due(now)):
             return
-        if not (force or writer.due(now)):
-            return
-        baseline = self.odometry.baseline()
+        baseline = self.odometry.baseline()      # (q, the encoder readings q was integrated up to)
         if baseline is None:
             return
-        q, turns = baseline
-        saved = checkpoints.Checkpoint(
-            robot_id=self.config.robot_id, scenario=self.config.scenario, q=tuple(q), wheel_turns=tuple(turns),
-            theta_hat=tuple(float(x) for x in self.state.theta_hat), estop=self.mode is Mode.ESTOPPED,
-            reason=self.estop_reason, wall=time.time(), monotonic=time.monotonic(), boot_id=self.boot_id,
-            seq=writer.written + 1, ended=ended, armed=self.mode is Mode.RUNNING)
-        if ended:
-            writer.close(saved)             # the last one, written before the process exits
-        else:
-            writer.offer(saved, now)        # written by the writer's thread
-        if writer.failures > self.checkpoint_failures_seen:
-            self.checkpoint_failures_seen = writer.failures
-            self.emit(now, "checkpoint", "fault", "error", f"checkpoint not written to {writer.path}: "
-                                                           f"{writer.last_error} (a restart cannot resume)")
+        failure = self.continuity.save(now, *baseline, self.state.theta_hat, estop=self.mode is Mode.ESTOPPED,
+                                       reason=self.estop_reason, armed=self.mode is Mode.RUNNING, ended=ended)
+        if failure is not None:
+            self.emit(now, "checkpoint", "fault", "error", failure)
 
     def control(self, now: float, operator):
         """`SharedController.step`, τ = B(ψ)⁻¹u_s scaled down uniformly to the torque limit; None (and zero
@@ -570,6 +538,5 @@ class ControllerDaemon:
             self.master.send_torques(self.tau)
             self.master.idle_all()
         self.save_checkpoint(time.monotonic(), force=True, ended=ended)
-        if self.checkpoints is not None:
-            self.checkpoints.close()        # a failed controller's last offer written too
+        self.continuity.close()             # a failed controller's last offer written too
         self.emit(time.monotonic(), "shutdown", "info", "info", "controller stopping: zero torque, axes IDLE")

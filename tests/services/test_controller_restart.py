@@ -148,7 +148,7 @@ def run_first_life(path, turns_moved=(0.4, -0.2, 0.1)):
         feed(d, now, tuple(t * k / steps for t in turns_moved), state=AxisState.CLOSED_LOOP_CONTROL, vel=vel)
         d.tick(now + 0.0005)
     d.save_checkpoint(now + 0.0005)
-    assert d.checkpoints.flush()
+    assert d.continuity.writer.flush()
     return d
 
 
@@ -189,7 +189,7 @@ def test_an_estop_latched_before_the_restart_stays_latched_and_is_repeated(tmp_p
     first = run_first_life(path)
     operator(first, 1, 10.007, estop=True)
     first.tick(10.007)
-    assert first.mode is Mode.ESTOPPED and first.checkpoints.flush()
+    assert first.mode is Mode.ESTOPPED and first.continuity.writer.flush()
     assert checkpoints.read(path).estop                           # offered at once, not 50 ms later
     second = daemon(path)
     second.begin()
