@@ -105,6 +105,7 @@ class FaultStack:
     publish: object = None                               # callable(payload bytes) on the operator command key
     captured: bytes | None = None                        # the last command of another session heard (evict)
     listener: object = None                              # a session the console connects to (evict, plain Zenoh)
+    capture: object = None                               # the subscriber that captures the holder's commands
     threads: list = field(default_factory=list)
     intrusions: dict = field(default_factory=dict)       # action -> what it did (counts), for the report
 
@@ -219,7 +220,7 @@ class FaultStack:
                         self.captured = payload
                 except Exception:  # noqa: BLE001 — whatever else is on the key is not worth capturing
                     pass
-            self.threads.append(listener.declare_subscriber(keys.operator_cmd_key(robot_id), capture))
+            self.capture = listener.declare_subscriber(keys.operator_cmd_key(robot_id), capture)
         session_id = f"estop-{os.getpid()}"
         seq = iter(range(1, 1 << 30))
         zeros = (0.0, 0.0, 0.0)
@@ -418,10 +419,9 @@ class FaultStack:
     def stop(self) -> None:
         self.continue_all()
         for thread in self.threads:
-            if isinstance(thread, threading.Thread):
-                thread.join(timeout=10.0)
-            else:
-                thread.undeclare()           # the evict fault's subscriber
+            thread.join(timeout=10.0)
+        if self.capture is not None:
+            self.capture.undeclare()
         for child in self.infra.values():
             child.stop(5.0)
         if self.listener is not None:
