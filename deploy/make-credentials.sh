@@ -1,6 +1,6 @@
 #!/bin/sh
 # Credentials of a sharedctl site: a private CA, the router's TLS certificate, one client
-# certificate and one password per role (operator, controller, robot, observer), the router's
+# certificate and one password per role (operator, controller, robot, observer; per named operator), the router's
 # password dictionary, and ready Zenoh configurations that use them.
 #
 #   deploy/make-credentials.sh [DIR] [sharedctl credentials options...]
@@ -12,9 +12,13 @@
 #   ROLE.password passwords.txt    the role's password; the router's usrpwd dictionary (user:password)
 #   router.json5 ROLE.json5        `sharedctl router --config router.json5`, `--zenoh-config ROLE.json5`
 #                                  (paths inside are relative to the file; see deploy/zenoh/*.json5)
-# Options: --host H (router certificate names, repeatable), --days N, --endpoint EP (default
-# tls/127.0.0.1:7447, or $SHAREDCTL_ROUTER_ENDPOINT). Running it again replaces everything:
-# every process then needs its new files.
+#   NAME.signing-key.pem           each operator's Ed25519 key (`sharedctl console --signing-key`)
+#   operators.toml                 the operators' public keys and robots (`sharedctl controller --operators`)
+# Options: --operator NAME[=ROBOT,...] (one set of credentials and a signing key per person, allowed
+# those robots only; repeatable; default one operator named `operator`, every robot), --host H
+# (router certificate names, repeatable), --days N, --endpoint EP (default tls/127.0.0.1:7447, or
+# $SHAREDCTL_ROUTER_ENDPOINT). Running it again replaces everything: every process then needs its
+# new files.
 set -eu
 DIR=${1:-/etc/sharedctl/credentials}
 [ $# -gt 0 ] && shift
@@ -28,5 +32,11 @@ fi
 mkdir -p "$DIR"
 # shellcheck disable=SC2086  # $SHAREDCTL may be "python3 -m ..."
 $SHAREDCTL credentials "$DIR" --configs --endpoint "$ENDPOINT" "$@"
-chmod 0644 "$DIR/ca.pem" "$DIR"/*.pem 2>/dev/null || true
-chmod 0600 "$DIR"/*-key.pem "$DIR"/*.password "$DIR/passwords.txt" "$DIR"/*.json5
+for f in "$DIR"/*.pem; do
+    case $f in
+        *-key.pem) chmod 0600 "$f" ;;       # TLS keys and operators' signing keys (NAME.signing-key.pem)
+        *) chmod 0644 "$f" ;;               # certificates
+    esac
+done
+chmod 0600 "$DIR"/*.password "$DIR/passwords.txt" "$DIR"/*.json5
+chmod 0644 "$DIR/operators.toml"

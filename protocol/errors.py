@@ -23,7 +23,8 @@ Hierarchy::
     │   ├── UnsupportedVersion  wire major differs from ours
     │   ├── UnknownKind       kind tag we do not know
     │   ├── UnexpectedKind    a valid message of another kind than asked for
-    │   └── MissingField      a required field is absent
+    │   ├── MissingField      a required field is absent
+    │   └── BadAttachment     an operator signature attachment that cannot be read
     └── KeyExprError          Zenoh key expression or id/role token
 """
 from __future__ import annotations
@@ -99,6 +100,10 @@ class UnexpectedKind(MessageError):
 
 class MissingField(MessageError):
     """A required field is absent from the payload."""
+
+
+class BadAttachment(MessageError):
+    """An operator signature attachment (protocol/signature.py) that is not one: size, encoding, fields."""
 
 
 class KeyExprError(ProtocolError):

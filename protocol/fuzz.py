@@ -32,9 +32,10 @@ from .messages import (
     shape_of,
 )
 from .msgpack_codec import decode_message, encode_message, to_map
-from .wire_types import ROBOT_DIMS
+from .signature import SIGNATURE_LEN, Signature, decode_attachment, encode_attachment
+from .wire_types import ROBOT_DIMS, TOKEN_PATTERN
 
-DECODERS = ("can", "message", "key")
+DECODERS = ("can", "message", "key", "attachment")
 
 
 @dataclass
@@ -283,6 +284,35 @@ def key_inputs(rng: random.Random, count: int) -> Iterator[str]:
         yield "".join(chars) if rng.random() < 0.9 else "".join(rng.choice(alphabet) for _ in range(rng.randint(0, 40)))
 
 
+def is_valid_attachment_output(decoded: Any) -> bool:
+    return (isinstance(decoded, Signature) and TOKEN_PATTERN.fullmatch(decoded.signer) is not None
+            and isinstance(decoded.value, bytes) and len(decoded.value) == SIGNATURE_LEN)
+
+
+def attachment_inputs(rng: random.Random, count: int) -> Iterator[bytes]:
+    """Signature attachments: random bytes, byte-mutated valid ones, and maps with fields changed or missing."""
+    corpus = [encode_attachment(_tok(rng), rng.randbytes(SIGNATURE_LEN)) for _ in range(32)]
+    junk = (None, 0, -1, 2, 1.5, "", "a/b", "x" * 70, b"\x00" * 63, b"\x00" * 65, [], {}, True)
+    for _ in range(count):
+        r = rng.random()
+        if r < 0.2:
+            yield rng.randbytes(rng.choice((0, 1, 8, 64, 96, rng.randint(0, 600))))
+        elif r < 0.6:
+            data = rng.choice(corpus)
+            for _ in range(rng.randint(1, 3)):
+                data = mutate_bytes(rng, data)
+            yield data
+        else:
+            body = msgpack.unpackb(rng.choice(corpus), raw=False)
+            for _ in range(rng.randint(0, 2)):
+                field_name = rng.choice(("v", "signer", "sig", "extra"))
+                if rng.random() < 0.3:
+                    body.pop(field_name, None)
+                else:
+                    body[field_name] = rng.choice(junk)
+            yield msgpack.packb(body, use_bin_type=True)
+
+
 def fuzz_inputs(name: str, inputs: Iterator[Any], decode: Callable[[Any], Any],
                 valid: Callable[[Any], bool], report: FuzzReport) -> FuzzReport:
     """Feed ``inputs`` to ``decode``; count typed errors, valid results and escapes into ``report``."""
@@ -309,7 +339,7 @@ def fuzz_inputs(name: str, inputs: Iterator[Any], decode: Callable[[Any], Any],
 
 
 def run_campaign(decoder: str, count: int, seed: int = 0) -> FuzzReport:
-    """Fuzz one decoder (``can``, ``message`` or ``key``) with ``count`` inputs."""
+    """Fuzz one decoder (``can``, ``message``, ``key`` or ``attachment``) with ``count`` inputs."""
     rng = random.Random(f"{decoder}:{seed}")
     report = FuzzReport(decoder)
     if decoder == "can":
@@ -319,5 +349,8 @@ def run_campaign(decoder: str, count: int, seed: int = 0) -> FuzzReport:
         return fuzz_inputs(decoder, message_inputs(rng, count), decode_message, is_valid_message_output, report)
     if decoder == "key":
         return fuzz_inputs(decoder, key_inputs(rng, count), parse_key, is_valid_key_output, report)
+    if decoder == "attachment":
+        return fuzz_inputs(decoder, attachment_inputs(rng, count), decode_attachment, is_valid_attachment_output,
+                           report)
     raise ValueError(f"unknown decoder {decoder!r}; choose from {', '.join(DECODERS)}")
 

@@ -65,6 +65,7 @@ class ConsoleOptions:
     rate: float = 50.0               # Hz
     deadman_mode: str = "hold"
     zenoh_config: str | None = None  # Zenoh JSON5 file (credentials, TLS, mode); endpoints above replace its own
+    signer: object = None            # security.signing.Signer: commands and lease queries signed; None: unsigned
 
 
 class Telemetry:
@@ -126,7 +127,7 @@ class ConsoleApp:
         self.script = ScriptedCommandSource(loop.human, counter) if options.script else None
         self.keyboard = KeyboardCommandSource(VirtualJoystick(deadman_mode=options.deadman_mode), counter)
         self.telemetry = Telemetry()
-        self.lease = LeaseClient(options.robot_id, options.operator_id, counter.session_id)
+        self.lease = LeaseClient(options.robot_id, options.operator_id, counter.session_id, signer=options.signer)
         self.telemetry.lease_listener = self.lease.on_state
         self.script_origin: float | None = None    # monotonic s: the script's t = 0
         self.lock = threading.Lock()          # guards the joystick and `last_command`
@@ -160,11 +161,13 @@ class ConsoleApp:
 
     def sender(self, publisher, stop: StopFlag) -> None:
         clock = RateClock(1.0 / self.options.rate)
+        signer, key = self.options.signer, str(publisher.key_expr)
         while not stop.stopped:
             command = self.next_command(time.monotonic())
             if command is not None:
                 try:
-                    publisher.put(encode_message(command, ROBOT_DIMS))
+                    payload = encode_message(command, ROBOT_DIMS)
+                    publisher.put(payload, attachment=None if signer is None else signer.attachment(key, payload))
                     self.sent += 1
                 except Exception:  # noqa: BLE001 — a failed put must not end the operator loop
                     self.publish_errors += 1

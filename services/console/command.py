@@ -1,5 +1,6 @@
 """`sharedctl console [--script SCENARIO] [--headless] [--duration S] [--zenoh-connect EP | --zenoh-listen EP]
-[--robot-id ID] [--scenario FILE]` — the operator console (docs/console.md)."""
+[--robot-id ID] [--operator-id NAME] [--signing-key FILE] [--scenario FILE]` — the operator console
+(docs/console.md)."""
 from __future__ import annotations
 
 import sys
@@ -11,6 +12,7 @@ from ..lifecycle import StopFlag
 from ..service_config import add_argument as add_service_config_argument
 from ..scenario_files import load
 from ..security import zenoh_config
+from ..security.signing import Signer, SigningError
 from ..zenoh_session import DEFAULT_ENDPOINT, EndpointError
 
 
@@ -31,6 +33,9 @@ def add_parser(subparsers) -> None:
     zenoh_config.add_argument(p)
     p.add_argument("--robot-id", default="robot1", help="robot id in the key expressions (default robot1)")
     p.add_argument("--operator-id", default="operator", help="operator id sent with every command")
+    p.add_argument("--signing-key", metavar="FILE",
+                   help="the operator's Ed25519 key (NAME.signing-key.pem from `sharedctl credentials`): every command "
+                        "and lease request is signed as --operator-id, which a controller with --operators requires")
     p.add_argument("--rate", type=float, default=50.0, metavar="HZ", help="command rate (default 50)")
     p.add_argument("--deadman", choices=("hold", "toggle"), default="hold",
                    help="the deadman holds while space repeats (default), or space toggles it: toggle latches, "
@@ -45,7 +50,8 @@ def run(args) -> int:
     stop = StopFlag().install()
     try:
         scenario = load(args.scenario or args.script or "paper_convex")
-    except ScenarioError as exc:
+        signer = Signer.from_file(args.signing_key, args.operator_id) if args.signing_key else None
+    except (ScenarioError, SigningError) as exc:
         print(f"sharedctl console: {exc}", file=sys.stderr)
         return 2
     if args.rate <= 0 or (args.duration is not None and args.duration <= 0):
@@ -58,6 +64,7 @@ def run(args) -> int:
         connect=None if args.zenoh_listen or (args.zenoh_config and not args.zenoh_connect)
         else (args.zenoh_connect or [DEFAULT_ENDPOINT]), zenoh_config=args.zenoh_config,
         robot_id=args.robot_id, operator_id=args.operator_id, rate=args.rate, deadman_mode=args.deadman,
+        signer=signer,
     )
     try:
         zenoh_config.check_session_args(options.zenoh_config, options.listen, options.connect)

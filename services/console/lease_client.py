@@ -5,7 +5,8 @@ a take while this console wants control and does not hold it (at start, again af
 and on T), a release when it holds control and no longer wants it (R). Each query carries its
 own per-session sequence number and the wall-clock send time (the controller drops replayed,
 out-of-order and stale lease requests). A query nobody answers (the controller is not up yet)
-is retried every `retry` seconds.
+is retried every `retry` seconds. With a `signer` each query carries the operator's signature
+(protocol/signature.py), which a controller with an operators file requires.
 
 RobotState tells the console when it has lost control without asking (the lease expired or
 was released in-band): `on_state` clears `holding` when a state newer than the grant names
@@ -31,8 +32,9 @@ class LeaseClient:
     """What this console wants (control or not) and what it has, kept in step with the controller."""
 
     def __init__(self, robot_id: str, operator_id: str, session_id: str, *, want: bool = True,
-                 retry: float = RETRY, timeout: float = QUERY_TIMEOUT) -> None:
+                 retry: float = RETRY, timeout: float = QUERY_TIMEOUT, signer=None) -> None:
         self.key = keys.lease_key(robot_id)
+        self.signer = signer                 # security.signing.Signer: each query signed; None: unsigned
         self.operator_id, self.session_id = operator_id, session_id
         self.retry, self.timeout = retry, timeout
         self.lock = threading.Lock()
@@ -86,7 +88,9 @@ class LeaseClient:
         self.queries += 1
         reply = None
         try:
-            for answer in session.get(self.key, payload=encode_message(request), timeout=self.timeout):
+            payload = encode_message(request)
+            attachment = None if self.signer is None else self.signer.attachment(self.key, payload)
+            for answer in session.get(self.key, payload=payload, attachment=attachment, timeout=self.timeout):
                 if answer.ok is None:
                     continue
                 try:

@@ -9,7 +9,7 @@
                          [--torque-at-us 0] [--cpu N] [--[no-]predict] [--rtt-probe-rate 10]
                          [--lease implicit|explicit] [--lease-expiry-ms 1000] [--max-command-age-ms 500]
                          [--max-clock-skew-ms MS] [--pose checkpoint|scenario] [--checkpoint FILE|none]
-                         [--checkpoint-max-age-s 60] [--json OUT]
+                         [--checkpoint-max-age-s 60] [--operators FILE] [--json OUT]
 
 Start (resume.py): the controller first disarms every drive and hears each one idle. With `--pose
 checkpoint` (the default) a controller that follows one that failed resumes from its checkpoint (the
@@ -18,6 +18,10 @@ an operator takes control; with no checkpoint, or the last controller stopped on
 at the scenario's pose — unless the drives report errors, which say a controller was driving them:
 then arming is refused, and why is said. `--pose scenario` declares the robot at the scenario's
 start pose (a first start, a re-homing).
+
+With `--operators FILE` (services/security/signing.py) only signed operator traffic counts: a command or a
+lease request needs a valid Ed25519 signature by an operator the file trusts for this robot, and must name
+that operator; the lease is then held by a verified identity (docs/security.md).
 
 At exit it prints a summary line for people and, with `--json OUT`, writes the loop statistics'
 summary as JSON (loop_stats.py: units in the key names) — what another module reads.
@@ -35,6 +39,7 @@ from sharedctl.scenario import ScenarioError
 
 from .. import can_bus, zenoh_session
 from ..security import zenoh_config
+from ..security.signing import TrustList
 from ..lifecycle import StopFlag
 from ..service_config import add_argument as add_service_config_argument
 from ..scenario_files import load
@@ -130,6 +135,11 @@ def add_parser(subparsers) -> None:
                         "controller-ROBOT.checkpoint); none: no checkpoint (a restart cannot resume)")
     p.add_argument("--checkpoint-max-age-s", type=float, default=CHECKPOINT_MAX_AGE,
                    help=f"an older checkpoint is not resumed from: arming is refused (default {CHECKPOINT_MAX_AGE:g})")
+    p.add_argument("--operators", metavar="FILE",
+                   help="the operators file (TOML, written by `sharedctl credentials`): only operator commands and "
+                        "lease requests signed by an operator it trusts for this robot, naming that operator, are "
+                        "accepted; the lease is bound to the verified operator (docs/security.md). Default: none, "
+                        "the operator id is what a command says (a single-operator bench)")
     p.add_argument("--json", metavar="OUT",
                    help="at exit, write the summary (ticks, missed deadlines, jitter, compute and CPU per period, CAN "
                         "frames, operator commands, …; loop_stats.py) as JSON to OUT")
@@ -163,6 +173,7 @@ def run(args) -> int:
                       else checkpoints.default_path(robot_id) if args.checkpoint is None else Path(args.checkpoint))
         if checkpoint is not None:
             checkpoint.parent.mkdir(parents=True, exist_ok=True)
+        operators = TrustList.from_file(args.operators) if args.operators else None
         scenario = load(args.scenario)
         loop, q0, _ = scenario.closed_loop(args.controller)
         spec = can_bus.spec_from_args(args)
@@ -183,6 +194,7 @@ def run(args) -> int:
         max_command_age=args.max_command_age_ms / 1e3,
         max_clock_skew=None if args.max_clock_skew_ms is None else args.max_clock_skew_ms / 1e3,
         scenario=scenario.name, pose=args.pose, checkpoint=checkpoint, checkpoint_max_age=args.checkpoint_max_age_s,
+        operators=operators,
     )
     bus = session = daemon = recording = None
     priority = raise_nice(args.priority)   # before Zenoh and CAN start their threads (they inherit it)

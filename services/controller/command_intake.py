@@ -30,6 +30,15 @@ def channel():
     return zenoh.handlers.FifoChannel(CHANNEL_CAPACITY)
 
 
+def attachment_bytes(sample) -> bytes | None:
+    """A sample's (or a query's) Zenoh attachment as bytes; None without one or if it cannot be read."""
+    try:
+        attachment = sample.attachment
+        return None if attachment is None else attachment.to_bytes()
+    except Exception:  # noqa: BLE001 — an unreadable attachment is none: a signed stream refuses it
+        return None
+
+
 class CommandIntake:
     """`subscriber.try_recv()` → (payload, monotonic, wall) queue → `policy.offer`, in arrival order."""
 
@@ -51,16 +60,17 @@ class CommandIntake:
             self.queue(sample)
 
     def queue(self, sample) -> None:
-        """One sample's payload with the times it was taken (an unreadable payload queues as empty bytes:
-        the policy refuses and counts it)."""
+        """One sample's payload and attachment with the times it was taken (an unreadable payload queues as empty
+        bytes, an unreadable attachment as none: the policy refuses and counts them)."""
         try:
             payload = sample.payload.to_bytes()
         except Exception:  # noqa: BLE001 — an unreadable payload is queued as empty bytes, never raised in the loop
             payload = b""
+        attachment = attachment_bytes(sample)
         if len(self.pending) >= MAX_PENDING:
             self.overflowed += 1
             return
-        self.pending.append((payload, self.clock(), self.wall_clock()))
+        self.pending.append((payload, self.clock(), self.wall_clock(), attachment))
 
     def apply(self) -> None:
         """Take what waits in the channel, then hand the oldest `BUDGET` queued payloads to the policy in
@@ -68,8 +78,8 @@ class CommandIntake:
         self.take()
         pending = self.pending
         for _ in range(min(BUDGET, len(pending))):
-            payload, now, wall = pending.popleft()
-            self.policy.offer(payload, now, wall)
+            payload, now, wall, attachment = pending.popleft()
+            self.policy.offer(payload, now, wall, attachment)
         if self.overflowed:
             overflowed, self.overflowed = self.overflowed, 0
             self.policy.rejections["command_queue_full"] += overflowed

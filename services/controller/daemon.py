@@ -58,6 +58,7 @@ import time
 
 import numpy as np
 
+from sharedctl.protocol import keys
 from sharedctl.protocol.msgpack_codec import encode_message
 from sharedctl.protocol.wire_types import Dims
 from sharedctl.shared_controller import HISTORY, NonFiniteCommand, SharedController
@@ -110,15 +111,19 @@ class ControllerDaemon:
         self.dims = Dims(dof=self.model.n, n_theta=self.model.n_theta, n_wheels=3)
         self.odometry = WheelOdometry(self.model, q0)
         self.wheel_map = self.model.wheel_map   # τ = B(ψ)⁻¹ u in closed form, on floats (OmniRobot's WheelMap)
+        trust = config.operators                  # who may command, by signature (security/signing.py), or None
         self.policy = OperatorInputPolicy(loop.human.kp, config.operator_timeout, self.dims,
                                           lease=OperatorLease(config.lease_expiry, config.lease_mode),
-                                          guard=ReplayGuard(config.max_command_age, config.max_clock_skew))
+                                          guard=ReplayGuard(config.max_command_age, config.max_clock_skew),
+                                          verify=trust and trust.verifier(keys.operator_cmd_key(config.robot_id),
+                                                                          config.robot_id))
         self.lease_guard = ReplayGuard(config.max_command_age, config.max_clock_skew)   # lease queries' own
         self.master = CanMaster(bus, arm_timeout=config.arm_timeout, probe_rate=config.rtt_probe_rate)
         self.session = session
         self.lock = threading.Lock()
         self.links = ControllerLinks(session, config.robot_id, ROLE, self.policy, self.lease_guard, self.lock,
-                                     EventLimiter(config.event_interval, ROLE), config.verbose)   # zenoh_links.py
+                                     EventLimiter(config.event_interval, ROLE), config.verbose,   # zenoh_links.py
+                                     trust and trust.verifier(keys.lease_key(config.robot_id), config.robot_id))
         self.intake, self.apply_commands, self.emit = self.links.intake, self.links.apply_commands, self.links.emit
         self.mode = Mode.STARTING
         self.start_requested_at: float | None = None   # master clock: when IDLE went to every axis (`begin`)

@@ -42,3 +42,4 @@ class DaemonConfig:
     checkpoint_interval: float = CHECKPOINT_INTERVAL  # s between checkpoints while running
     checkpoint_max_age: float = CHECKPOINT_MAX_AGE    # s: an older checkpoint is not resumed from
     pose_tolerance: float = 0.01        # m: wheel travel the odometry may have missed before arming is refused
+    operators: object = None            # security.signing.TrustList: signed operator traffic only; None: ids as sent

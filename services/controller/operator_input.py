@@ -15,9 +15,17 @@ Pure: payload bytes and reception times in, `OperatorInput` out; the caller supp
   implicit mode a command while nobody holds the lease takes it. The holder's last accepted
   command is the current one; once the lease is released or expired it no longer drives
   (reason `no_lease`, hands-off).
+* Identity (`verify`, set when the controller has an operators file: services/security/signing.py):
+  a command counts only with a valid signature, by an operator trusted for this robot, over this
+  robot's command key and the payload, and only if the `operator_id` it carries is the signer's
+  (`identity_mismatch` otherwise). Everything after — order, rate, lease — keys on that verified
+  id. A message that fails is counted by reason (`unsigned`, `bad_attachment`,
+  `unknown_operator`, `not_permitted`, `bad_signature`, `identity_mismatch`) and touches no state
+  of any session: it neither advances a sequence, spends a rate budget, nor makes the holder
+  hands-off. Without `verify` the operator id is what the command says (a single-operator bench).
 * Estop: an `estop` in any well-formed command — from any operator, holder or not, even one
   dropped as stale, duplicated or out of order — latches `estop_requested` (fail-safe: a replay
-  can stop the robot, never move it).
+  can stop the robot, never move it). With `verify`, from any verified operator of this robot.
 * Hands-off (u_h = 0, v_h = 0, wish held at the last q_d with zero rates) when the operator
   has been silent for more than `timeout` (0.3 s), the deadman is released, or the last
   payload was rejected (malformed or invalid: a `ProtocolError` from the decoder). Before
@@ -84,6 +92,7 @@ class OperatorInputPolicy:
     lease_limit: RateLimit = field(default_factory=lambda: RateLimit(LEASE_RATE, LEASE_BURST))   # lease queries
     bounds: WishBounds = field(default_factory=WishBounds)        # the wish near the robot (admission.py)
     pose: object = None                                           # the robot's pose, as the loop last read it
+    verify: object = None           # (payload, attachment) -> (signer, reason): operator identity, or None (signing.py)
     _recent: deque = field(default_factory=deque)        # seqs of the current session
     _input_of: tuple | None = None                        # (command, hands_off) that `_input` was built from
     _input: OperatorInput | None = None
@@ -92,11 +101,18 @@ class OperatorInputPolicy:
         self.kp = np.asarray(self.kp, dtype=float)
 
     # ------------------------------------------------------------------ input
-    def offer(self, payload: bytes, now: float, wall_now: float | None = None) -> bool:
+    def offer(self, payload: bytes, now: float, wall_now: float | None = None, attachment: bytes | None = None) -> bool:
         """Decode and judge one payload received at `now` (s, controller clock). True if accepted.
 
         `wall_now` (s, same clock as the sender's `send_time`) gives the latency; None: unknown.
+        `attachment`: the sample's Zenoh attachment (the operator's signature, checked when `verify` is set).
         """
+        signer = None
+        if self.verify is not None:
+            signer, reason = self.verify(payload, attachment)
+            if reason is not None:
+                self.rejections[reason] += 1     # not the holder's doing: its input stays as it was
+                return False
         try:
             command = decode_message(bytes(payload), self.dims, expect=OperatorCommand)
         except ProtocolError as exc:
@@ -106,6 +122,9 @@ class OperatorInputPolicy:
         except Exception as exc:  # noqa: BLE001 — a bad payload never escapes a receive path
             self.rejections[f"unexpected_{type(exc).__name__}"] += 1
             self.last_rejected = True
+            return False
+        if signer is not None and command.operator_id != signer:
+            self.rejections["identity_mismatch"] += 1
             return False
         return self.accept(command, now, wall_now)
 

@@ -20,7 +20,7 @@ from sharedctl.protocol import keys
 from sharedctl.protocol.msgpack_codec import encode_message
 
 from . import command_intake, lease_queries
-from .command_intake import CommandIntake
+from .command_intake import CommandIntake, attachment_bytes
 
 LEASE_CAPACITY = 64   # lease queries Zenoh holds for the loop
 LEASE_BUDGET = 4      # lease queries answered per poll
@@ -28,10 +28,13 @@ LEASE_BUDGET = 4      # lease queries answered per poll
 
 class ControllerLinks:
     """The publishers, token, subscriber and queryable of robot `robot_id`'s controller (`role`) on `session`;
-    `policy` judges the operator commands and holds the lease, `lock` is the daemon's."""
+    `policy` judges the operator commands and holds the lease, `lock` is the daemon's; `lease_verify` checks the
+    signature of each lease query (None: no operator identity)."""
 
-    def __init__(self, session, robot_id: str, role: str, policy, lease_guard, lock, events, verbose: bool) -> None:
+    def __init__(self, session, robot_id: str, role: str, policy, lease_guard, lock, events, verbose: bool,
+                 lease_verify=None) -> None:
         self.robot_id, self.policy, self.lease_guard, self.lock = robot_id, policy, lease_guard, lock
+        self.lease_verify = lease_verify      # operator identity of lease queries (signing.py), or None
         self.events, self.verbose = events, verbose       # events: telemetry.EventLimiter
         self.state_pub = session.declare_publisher(keys.state_key(robot_id))
         self.event_pub = session.declare_publisher(keys.events_key(robot_id))
@@ -61,7 +64,8 @@ class ControllerLinks:
         except Exception:  # noqa: BLE001 — an unreadable payload is answered as an empty (refused) request
             payload = b""
         reply = lease_queries.answer(payload, self.policy.lease, self.lease_guard, self.policy.rejections,
-                                     time.monotonic(), time.time(), self.policy.lease_limit)
+                                     time.monotonic(), time.time(), self.policy.lease_limit,
+                                     attachment_bytes(query), self.lease_verify)
         try:
             query.reply(keys.lease_key(self.robot_id), encode_message(reply))
         except Exception as exc:  # noqa: BLE001 — a vanished querier must not stop anything

@@ -45,8 +45,8 @@ from sharedctl.services import can_bus
 
 from sharedctl.services.children import (Child, free_udp_port, raise_priority, start_child, udp_receive_buffer_errors,
                                          wait_listening)
-from sharedctl.services.faults.stack import FaultStack, add_arguments as add_fault_arguments
-from sharedctl.services.security.secure_stack import SecureStack, add_arguments as add_secure_arguments
+from sharedctl.services.faults.stack import ESTOP_OPERATOR, FaultStack, add_arguments as add_fault_arguments
+from sharedctl.services.security.secure_stack import OPERATOR, SecureStack, add_arguments as add_secure_arguments
 from sharedctl.services.recording.launch import add_argument as add_record_argument, open_demo_recording
 from .measure import TOLERANCE, Recorder, deviation, measure, plant_reference_run, reference_run, states_at
 from sharedctl.services.lifecycle import StopFlag
@@ -147,7 +147,8 @@ def run(args) -> int:
         recording = open_demo_recording(args.record, args.robot_id, scenario_arg, scenario.name, can_controller,
                                         seed=None if faults.empty else faults.plan.seed)   # docs/recording.md
         faults.start(controller_ep, args.robot_id, log_dir, backstop, start_child, wait_listening)
-        secure.start(log_dir, backstop, wait_listening)
+        secure.start(log_dir, backstop, wait_listening, args.robot_id,
+                     (OPERATOR, ESTOP_OPERATOR) if faults.sends_estop else (OPERATOR,))
         children["robot"] = start_child("robot", ["robot", "--scenario", scenario_arg,
                                                   *secure.zenoh_args("robot", ["--zenoh-listen", robot_ep]), *can_robot,
                                                   *faults.robot_arguments(),
@@ -179,7 +180,8 @@ def run(args) -> int:
         if recording is not None:
             recording.attach(session)
         faults.attach(secure.operator_session() if secure.enabled and faults.needs_operator_session else session,
-                      faults.listener or session, args.robot_id)
+                      faults.listener or session, args.robot_id,
+                      secure.signer(ESTOP_OPERATOR) if faults.sends_estop else None)
         subscribers = [session.declare_subscriber(keys.truth_key(args.robot_id), rec.on_truth),
                 session.declare_subscriber(keys.state_key(args.robot_id), rec.on_state),
                 session.declare_subscriber(keys.events_key(args.robot_id), rec.on_event)]

@@ -103,7 +103,7 @@ class FaultStack:
     bus: object = None                                   # the drives' bus (can_bus.BusSpec) for an intruder
     router: object = None                                # the --secure stack, for router.restart_at
     publish: object = None                               # callable(payload bytes) on the operator command key
-    captured: bytes | None = None                        # the last command of another session heard (evict)
+    captured: tuple | None = None                        # (payload, attachment): another session's last command
     listener: object = None                              # a session the console connects to (evict, plain Zenoh)
     capture: object = None                               # the subscriber that captures the holder's commands
     threads: list = field(default_factory=list)
@@ -197,10 +197,16 @@ class FaultStack:
     def needs_operator_session(self) -> bool:
         return any(f.action in ("estop", "flood", "evict") for f in self.plan.processes)
 
-    def attach(self, session, listener, robot_id: str) -> None:
+    @property
+    def sends_estop(self) -> bool:
+        return any(f.action == "estop" for f in self.plan.processes)
+
+    def attach(self, session, listener, robot_id: str, signer=None) -> None:
         """The demo's own sessions: `operator.estop_at`, `flood_at` and `evict_at` publish on `session` (one that
         may publish operator commands), straight to the controller; `evict_at` listens on `listener` (one that
-        receives them) for the lease holder's commands."""
+        receives them) for the lease holder's commands, and replays one with its attachment (a signature, if the
+        holder signs). `signer` (security/signing.py): the estop is signed by that operator (`ESTOP_OPERATOR`,
+        trusted by a controller with an operators file); floods and junk sessions are never signed."""
         if not self.needs_operator_session:
             return
         from sharedctl.protocol import keys
@@ -208,7 +214,8 @@ class FaultStack:
         from sharedctl.protocol.msgpack_codec import encode_message
 
         from ..lifecycle import steady_wall
-        publisher = session.declare_publisher(keys.operator_cmd_key(robot_id))
+        key = keys.operator_cmd_key(robot_id)
+        publisher = session.declare_publisher(key)
         self.publish = publisher.put
         if any(f.action == "evict" for f in self.plan.processes):
             from sharedctl.protocol.msgpack_codec import decode_message
@@ -217,7 +224,7 @@ class FaultStack:
                 payload = sample.payload.to_bytes()
                 try:
                     if not decode_message(payload, expect=OperatorCommand).operator_id.startswith("fault-"):
-                        self.captured = payload
+                        self.captured = (payload, None if sample.attachment is None else sample.attachment.to_bytes())
                 except Exception:  # noqa: BLE001 — whatever else is on the key is not worth capturing
                     pass
             self.capture = listener.declare_subscriber(keys.operator_cmd_key(robot_id), capture)
@@ -226,10 +233,11 @@ class FaultStack:
         zeros = (0.0, 0.0, 0.0)
 
         def send() -> None:
-            publisher.put(encode_message(OperatorCommand(
+            payload = encode_message(OperatorCommand(
                 operator_id=ESTOP_OPERATOR, session_id=session_id, seq=next(seq), send_time=steady_wall(),
                 joystick=zeros, q_d=zeros, qd_d=zeros, qdd_d=zeros, deadman=False, estop=True,
-                control_request=ControlRequest.NONE)))
+                control_request=ControlRequest.NONE))
+            publisher.put(payload, attachment=None if signer is None else signer.attachment(key, payload))
         self.estop_sender = send
 
     def arm(self, t0: float, lease_wall: float | None = None) -> None:
@@ -386,12 +394,12 @@ class FaultStack:
         self.intrusions["flood"] = {"commands": sent, "rate_hz": fault.hz}
 
     def _evict(self, fault: ProcessFault) -> None:
-        """200 sessions of one command each, then the holder's last command as it was captured."""
+        """200 sessions of one command each, then the holder's last command as it was captured (its signature too)."""
         captured = self.captured
         for k in range(EVICTING_SESSIONS):
             self.publish(next(self._operator_commands(f"evict{os.getpid()}x{k}", q_d=(0.0, 0.0, 0.0))))
         if captured is not None:
-            self.publish(captured)
+            self.publish(captured[0], attachment=captured[1])
         self.intrusions["evict"] = {"sessions": EVICTING_SESSIONS, "replayed": captured is not None}
 
     def _bounce_router(self, fault: ProcessFault) -> None:

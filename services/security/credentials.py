@@ -10,6 +10,15 @@ One call, `generate(directory)`, writes everything a router and its clients need
                             connect_private_key; the ACL matches `cert_common_names` on it under mTLS)
     passwords.txt           the router's usrpwd dictionary_file: one `user:password` line per role
     ROLE.password           that role's password alone (what its own config carries)
+    NAME.signing-key.pem    each operator's Ed25519 key for signing its commands and lease requests
+                            (`sharedctl console --signing-key`; services/security/signing.py)
+    operators.toml          the operators a controller trusts: each one's public key and robots
+                            (`sharedctl controller --operators`)
+
+Operators are named: `operators={"alice": ("robot1",), "bob": ("*",)}` writes a user, a
+certificate (CN = the name), a password and a signing key per operator instead of the single
+`operator` role's, and the router's ACL (roles.py) gives each one the keys of its robots only.
+Without `operators` the single operator is named `operator` and may command every robot.
 
 Keys are ECDSA P-256 in PKCS#8 PEM, mode 0600; certificates are X.509 v3 with the extensions
 rustls (Zenoh's TLS) insists on: the CA has basicConstraints CA:TRUE and keyCertSign, leaves are
@@ -29,9 +38,11 @@ from pathlib import Path
 from cryptography import x509
 from cryptography.hazmat.primitives import hashes, serialization
 from cryptography.hazmat.primitives.asymmetric import ec
+from cryptography.hazmat.primitives.asymmetric.ed25519 import Ed25519PrivateKey
 from cryptography.x509.oid import ExtendedKeyUsageOID, NameOID
 
-from .roles import ROLES, check_role_name
+from .roles import ROLES, principals
+from .signing import trust_file_text, write_private_key
 
 ROUTER_NAME = "router"
 DEFAULT_HOSTS = ("localhost", "127.0.0.1")
@@ -47,7 +58,8 @@ class Credentials:
     """Paths (and passwords) of one generated set; `directory` holds them all."""
 
     directory: Path
-    users: dict[str, str] = field(default_factory=dict)      # role -> password
+    users: dict[str, str] = field(default_factory=dict)      # user (a role, or an operator's name) -> password
+    operators: dict[str, tuple[str, ...]] = field(default_factory=dict)   # operator name -> robots it may command
 
     @property
     def ca(self) -> Path:
@@ -62,6 +74,13 @@ class Credentials:
 
     def private_key(self, name: str) -> Path:
         return self.directory / f"{name}-key.pem"
+
+    def signing_key(self, operator: str) -> Path:
+        return self.directory / f"{operator}.signing-key.pem"
+
+    @property
+    def trust_file(self) -> Path:
+        return self.directory / "operators.toml"
 
 
 def _name(common_name: str) -> x509.Name:
@@ -115,10 +134,13 @@ def _leaf(common_name: str, ca_cert: x509.Certificate, ca_key, days: int, server
     return builder.sign(ca_key, hashes.SHA256()), key
 
 
-def generate(directory: str | Path, roles=ROLES, hosts=DEFAULT_HOSTS, days: int = DEFAULT_DAYS) -> Credentials:
-    """Write a fresh CA, the router's certificate, one client certificate and password per role."""
+def generate(directory: str | Path, roles=ROLES, hosts=DEFAULT_HOSTS, days: int = DEFAULT_DAYS,
+             operators: dict | None = None) -> Credentials:
+    """Write a fresh CA, the router's certificate, one client certificate and password per role (per named
+    operator for the operator role), and each operator's signing key and the operators file."""
     directory = Path(directory)
-    roles = tuple(check_role_name(r) for r in roles)
+    named = principals(roles, operators)
+    operators = {name: robots for name, (role, robots) in named.items() if role == "operator"}
     if days <= 0:
         raise CredentialsError("days must be positive")
     try:
@@ -130,31 +152,37 @@ def generate(directory: str | Path, roles=ROLES, hosts=DEFAULT_HOSTS, days: int 
                                   critical=True)
                    .add_extension(x509.SubjectKeyIdentifier.from_public_key(ca_key.public_key()), critical=False)
                    .sign(ca_key, hashes.SHA256()))
-        creds = Credentials(directory, {role: secrets.token_urlsafe(24) for role in roles})
+        creds = Credentials(directory, {name: secrets.token_urlsafe(24) for name in named}, operators)
         _write_cert(creds.ca, ca_cert)
         _write_key(directory / "ca-key.pem", ca_key)
         cert, key = _leaf(ROUTER_NAME, ca_cert, ca_key, days, server_hosts=hosts)
         _write_cert(creds.certificate(ROUTER_NAME), cert)
         _write_key(creds.private_key(ROUTER_NAME), key)
-        for role in roles:
-            cert, key = _leaf(role, ca_cert, ca_key, days)
-            _write_cert(creds.certificate(role), cert)
-            _write_key(creds.private_key(role), key)
-            _write_secret(directory / f"{role}.password", creds.users[role].encode() + b"\n")
+        for name in named:
+            cert, key = _leaf(name, ca_cert, ca_key, days)
+            _write_cert(creds.certificate(name), cert)
+            _write_key(creds.private_key(name), key)
+            _write_secret(directory / f"{name}.password", creds.users[name].encode() + b"\n")
         _write_secret(creds.dictionary, "".join(f"{u}:{p}\n" for u, p in creds.users.items()).encode())
+        signing = {name: Ed25519PrivateKey.generate() for name in operators}
+        for name, key in signing.items():
+            write_private_key(creds.signing_key(name), key)
+        if signing:
+            creds.trust_file.write_text(trust_file_text({n: (k, operators[n]) for n, k in signing.items()}))
     except OSError as exc:
         raise CredentialsError(f"cannot write credentials in {directory}: {exc}") from exc
     return creds
 
 
-def load(directory: str | Path, roles=ROLES) -> Credentials:
-    """The credentials `generate` wrote in `directory` (passwords read from ROLE.password)."""
+def load(directory: str | Path, roles=ROLES, operators: dict | None = None) -> Credentials:
+    """The credentials `generate` wrote in `directory` (passwords read from NAME.password)."""
     directory = Path(directory)
+    named = principals(roles, operators)
     users = {}
-    for role in roles:
+    for role in named:
         path = directory / f"{role}.password"
         try:
             users[role] = path.read_text().strip()
         except OSError as exc:
             raise CredentialsError(f"cannot read {path}: {exc}") from exc
-    return Credentials(directory, users)
+    return Credentials(directory, users, {n: robots for n, (role, robots) in named.items() if role == "operator"})

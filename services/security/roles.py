@@ -23,6 +23,13 @@ replay guard key on operator and session id). Deliveries of a query go only to t
 one router serves several robots with the same rules. A message nobody allowed is dropped by the
 router without an error at the sender (Zenoh's ACL gives no feedback; the router logs it at
 debug level).
+
+**Operators by name.** `access_control(operators={"alice": ("robot1",), "bob": ("*",)})` gives each
+operator its own subject (user name and certificate common name = the operator's name) and its
+own policy: the operator role's rules with the robot-id chunk replaced by the robots it may
+command (`*` for every one). alice's credentials then cannot put a command or ask for the lease of
+robot2 at the router, whatever the controller does. Without `operators` there is one operator
+subject named `operator` for every robot (`{"operator": ("*",)}`).
 """
 from __future__ import annotations
 
@@ -43,6 +50,28 @@ def check_role_name(role: object) -> str:
     if not isinstance(role, str) or not _ROLE_NAME.match(role):
         raise RoleError(f"role {role!r}: 1..64 letters, digits, '_' or '-'")
     return role
+
+
+ANY_ROBOT = "*"
+RESERVED_NAMES = ("router", "ca")     # file names the credentials directory uses for itself
+
+
+def check_operators(operators: dict, roles=ROLES) -> dict[str, tuple[str, ...]]:
+    """{operator name: robots} with tokens only: a name that is not another role's or reserved, robots that are
+    robot ids or `*`; raises RoleError."""
+    checked: dict[str, tuple[str, ...]] = {}
+    for name, robots in operators.items():
+        check_role_name(name)
+        if (name in roles and name != "operator") or name in RESERVED_NAMES:
+            raise RoleError(f"operator name {name!r} is taken by a role or a file of the site")
+        robots = tuple(robots)
+        if not robots:
+            raise RoleError(f"operator {name!r}: no robots (give robot ids, or * for every robot)")
+        for robot in robots:
+            if robot != ANY_ROBOT:
+                check_role_name(robot)
+        checked[name] = robots
+    return checked
 
 
 # role -> {message kind: key expressions it may send (flow ingress at the router)}
@@ -84,44 +113,74 @@ def _rule(rule_id: str, flow: str, messages, key_exprs) -> dict:
             "key_exprs": list(key_exprs)}
 
 
-def rules_for(role: str) -> list[dict]:
-    """The allow rules of one role (ids `ROLE-write-KIND`, `ROLE-deliver-KIND`)."""
+def _for_robots(key_exprs, robots) -> list[str]:
+    """The role's key expressions with the robot-id chunk `*` replaced by each of `robots`."""
+    if tuple(robots) == (ANY_ROBOT,):
+        return list(key_exprs)
+    return [key.replace(PREFIX, f"sharedctl/v1/{robot}", 1) for key in key_exprs for robot in robots]
+
+
+def rules_for(role: str, name: str | None = None, robots=(ANY_ROBOT,)) -> list[dict]:
+    """The allow rules of one role (ids `NAME-write-KIND`, `NAME-deliver-KIND`; NAME = the role unless given), for
+    the keys of `robots` (default every robot)."""
     if role not in WRITES:
         raise RoleError(f"unknown role {role!r} (one of {', '.join(ROLES)})")
-    rules = [_rule(f"{role}-write-{kind}", "ingress", [kind], keys) for kind, keys in WRITES[role].items()]
-    rules += [_rule(f"{role}-deliver-{kind}", "egress", [kind], keys) for kind, keys in DELIVERIES[role].items()]
+    name = name or role
+    rules = [_rule(f"{name}-write-{kind}", "ingress", [kind], _for_robots(keys, robots))
+             for kind, keys in WRITES[role].items()]
+    rules += [_rule(f"{name}-deliver-{kind}", "egress", [kind], _for_robots(keys, robots))
+              for kind, keys in DELIVERIES[role].items()]
     return rules
 
 
-def subject(role: str, tls: bool, usrpwd: bool) -> dict:
-    """How the router recognises a role: its username and/or (mTLS) its certificate's common name."""
-    entry: dict = {"id": f"{role}-subject"}
+def subject(name: str, tls: bool, usrpwd: bool) -> dict:
+    """How the router recognises a role or a named operator: its username and/or (mTLS) its certificate's common
+    name."""
+    entry: dict = {"id": f"{name}-subject"}
     if usrpwd:
-        entry["usernames"] = [role]
+        entry["usernames"] = [name]
     if tls:
-        entry["cert_common_names"] = [role]
+        entry["cert_common_names"] = [name]
     if len(entry) == 1:
         raise RoleError("a subject needs usernames (usrpwd) or certificate common names (mTLS)")
     return entry
 
 
-def access_control(roles=ROLES, tls: bool = False, usrpwd: bool = True) -> dict:
-    """The router's `access_control` section: default deny, the rules above for each role.
+def principals(roles=ROLES, operators: dict | None = None) -> dict[str, tuple[str, tuple[str, ...]]]:
+    """{user name: (role, robots)}: every role but the operator under its own name for every robot, and each
+    operator under its name for its robots (default: one operator named `operator`, every robot)."""
+    roles = [check_role_name(r) for r in roles]
+    if operators is None:
+        operators = {"operator": (ANY_ROBOT,)} if "operator" in roles else {}
+    operators = check_operators(operators, roles)
+    named: dict[str, tuple[str, tuple[str, ...]]] = {}
+    for role in roles:
+        if role == "operator":
+            named.update({name: ("operator", robots) for name, robots in operators.items()})
+        else:
+            named[role] = (role, (ANY_ROBOT,))
+    if "operator" not in roles:
+        named.update({name: ("operator", robots) for name, robots in operators.items()})
+    return named
+
+
+def access_control(roles=ROLES, tls: bool = False, usrpwd: bool = True, operators: dict | None = None) -> dict:
+    """The router's `access_control` section: default deny, the rules above for each role, one subject and policy
+    per named operator (`principals`).
 
     With both `tls` and `usrpwd`, a subject matches only a connection that presents both the
     role's certificate and the role's password (Zenoh takes the product of the lists)."""
-    roles = [check_role_name(r) for r in roles]
     read = [_rule("read-declare", "ingress", READ_INGRESS, [ALL_KEYS]),
             _rule("read-deliver", "egress", READ_EGRESS, [ALL_KEYS]),
             _rule("read-deliver-put", "egress", ["put"], READ_PUTS)]
     rules = list(read)
     policies = []
     subjects = []
-    for role in roles:
-        own = rules_for(role)
+    for name, (role, robots) in principals(roles, operators).items():
+        own = rules_for(role, name, robots)
         rules += own
-        subjects.append(subject(role, tls, usrpwd))
-        policies.append({"id": f"{role}-policy", "rules": [r["id"] for r in read + own],
-                         "subjects": [f"{role}-subject"]})
+        subjects.append(subject(name, tls, usrpwd))
+        policies.append({"id": f"{name}-policy", "rules": [r["id"] for r in read + own],
+                         "subjects": [f"{name}-subject"]})
     return {"enabled": True, "default_permission": "deny", "rules": rules, "subjects": subjects,
             "policies": policies}

@@ -20,10 +20,18 @@ With ``--secure``:
       console     client   role operator     (OperatorCommand, lease queries)
       demo        client   role observer     (subscribes only)
 
+Operators are named and sign (services/security/signing.py): the credentials name the console's
+operator (`operator`) and, when an estop fault is injected, the fault's estop button, each allowed
+this robot only at the router; the controller runs with `--operators` (their public keys) and the
+console with `--signing-key`, so every command and lease request that drives is signed, and the
+lease is held by a verified identity.
+
 With ``--fault``: every fault but the Zenoh link faults (``operator.*``/``telemetry.*``
 impairments, whose relay is a plain peer between console and controller). Faults that publish
 operator commands (``operator.estop_at``, ``flood_at``, ``evict_at``) do so on a session of the
-operator role (`operator_session`); ``router.restart_at`` kills the router and starts it again
+operator role (`operator_session`); the estop signed by its own operator (`signer`), the flood and
+the junk sessions of the eviction unsigned (an intruder with the router's credentials but no
+operator's key); ``router.restart_at`` kills the router and starts it again
 on its endpoint (`bounce`): the clients reconnect by themselves.
 
 What the summary adds (``security``): the endpoint, what was enforced, the router's exit, and
@@ -46,10 +54,12 @@ from sharedctl.protocol import keys
 
 from ..children import Child
 from .credentials import Credentials, generate
+from .signing import Signer
 from .roles import ROLES
 from .zenoh_config import check_endpoint, client_config, open_from_file, router_config, write_config
 
 READY_TIMEOUT = 30.0   # s for the router to listen and a role to show its liveliness token
+OPERATOR = "operator"  # the console's operator: its name at the router and in its signed commands
 
 
 def add_arguments(p) -> None:
@@ -98,17 +108,20 @@ class SecureStack:
         return cls(enabled=True, endpoint=endpoint)
 
     # ----- the run ---------------------------------------------------------------
-    def start(self, log_dir: Path, backstop: str, wait_listening) -> None:
-        """Credentials and configs in a temporary directory, the router child, the observer session."""
+    def start(self, log_dir: Path, backstop: str, wait_listening, robot_id: str = "robot1",
+              operators: tuple[str, ...] = (OPERATOR,)) -> None:
+        """Credentials and configs in a temporary directory (`operators`: the named operators, each allowed
+        `robot_id` only), the router child, the observer session."""
         if not self.enabled:
             return
         self.directory = Path(tempfile.mkdtemp(prefix="sharedctl-secure-"))
-        self.creds = generate(self.directory / "credentials", ROLES)
+        self.creds = generate(self.directory / "credentials", ROLES,
+                              operators={name: (robot_id,) for name in operators})
         self.configs["router"] = write_config(self.directory / "router.json5",
                                               router_config(self.creds, [self.endpoint]), "sharedctl demo --secure")
-        for role in ROLES:
-            self.configs[role] = write_config(self.directory / f"{role}.json5",
-                                              client_config(role, self.creds, [self.endpoint]), f"demo {role}")
+        for name in self.creds.users:
+            self.configs[name] = write_config(self.directory / f"{name}.json5",
+                                              client_config(name, self.creds, [self.endpoint]), f"demo {name}")
         self.log_dir, self.backstop, self.wait_listening = log_dir, backstop, wait_listening
         self.router = _start_router(["--config", str(self.configs["router"]), "--duration", backstop], log_dir)
         if not wait_listening(self.endpoint, self.router, READY_TIMEOUT):
@@ -116,10 +129,14 @@ class SecureStack:
         self.session = open_from_file(self.configs["observer"])
 
     def operator_session(self):
-        """A session of the operator role (opened once), for the faults that publish operator commands."""
+        """A session of the console's operator (opened once), for the faults that publish operator commands."""
         if self.operator is None:
-            self.operator = open_from_file(self.configs["operator"])
+            self.operator = open_from_file(self.configs[OPERATOR])
         return self.operator
+
+    def signer(self, name: str) -> Signer | None:
+        """Operator `name`'s signer (None when not secure)."""
+        return Signer.from_file(self.creds.signing_key(name), name) if self.enabled else None
 
     def bounce(self, down: float) -> dict:
         """router.restart_at: SIGKILL the router, wait `down` s, start it again on its endpoint."""
@@ -135,8 +152,13 @@ class SecureStack:
         return {"down_s": down, "back_listening": back, "killed_pid": old.popen.pid, "pid": self.router.popen.pid}
 
     def zenoh_args(self, role: str, plain: list[str]) -> list[str]:
-        """A child's Zenoh arguments: its role's configuration file, or `plain` when not secure."""
-        return ["--zenoh-config", str(self.configs[role])] if self.enabled else plain
+        """A child's Zenoh arguments: its role's configuration file (and the operator's identity: the console
+        signs as `operator`, the controller trusts the operators file), or `plain` when not secure."""
+        if not self.enabled:
+            return plain
+        identity = {"operator": ["--operator-id", OPERATOR, "--signing-key", str(self.creds.signing_key(OPERATOR))],
+                    "controller": ["--operators", str(self.creds.trust_file)]}.get(role, [])
+        return ["--zenoh-config", str(self.configs[OPERATOR if role == "operator" else role]), *identity]
 
     def wait_up(self, role: str, robot_id: str, child, timeout: float, plain_wait) -> bool:
         """Secure: the role's liveliness token is visible through the router; else `plain_wait()`."""
@@ -184,7 +206,10 @@ class SecureStack:
                 "router_endpoint": self.endpoint,
                 "authentication": "usrpwd"
                                   + (" + mTLS client certificates" if self.endpoint.startswith("tls/") else ""),
-                "access_control": "default deny; per-role rules (services/security/roles.py)",
+                "access_control": "default deny; per-role rules, each operator its robot's keys only "
+                                  "(services/security/roles.py)",
+                "operator_identity": "Ed25519-signed commands and lease requests, verified by the controller "
+                                     f"(operators: {', '.join(self.creds.operators)})",
                 "roles": {"robot": "robot", "controller": "controller", "console": "operator", "demo": "observer"},
                 "router": self.router.report() if self.router is not None else None,
                 "routers_killed_on_purpose": [r.report() for r in self.bounced],

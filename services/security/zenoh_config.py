@@ -148,7 +148,8 @@ def tls_files(creds: Credentials, name: str, listen: bool) -> dict:
 
 
 def client_config(role: str, creds: Credentials, connect: list[str], usrpwd: bool = True) -> dict:
-    """A role's client of the router: its user/password and, for tls/ endpoints, its certificate."""
+    """A role's (or a named operator's) client of the router: its user/password and, for tls/ endpoints, its
+    certificate."""
     role = check_role_name(role)
     cfg: dict = {"mode": "client", "connect": {"endpoints": [check_endpoint(e) for e in connect],
                                                "timeout_ms": CONNECT_TIMEOUT_MS},
@@ -171,7 +172,7 @@ def router_config(creds: Credentials, listen: list[str], usrpwd: bool = True, ac
     if tls:
         cfg["transport"]["link"] = {"tls": tls_files(creds, "router", listen=True)}
     if acl:
-        cfg["access_control"] = access_control(roles, tls=tls, usrpwd=usrpwd)
+        cfg["access_control"] = access_control(roles, tls=tls, usrpwd=usrpwd, operators=creds.operators or None)
     return cfg
 
 

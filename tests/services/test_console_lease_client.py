@@ -18,11 +18,12 @@ class StandIn:
     """`session.get` answered by a function of the request (None: nobody answers)."""
 
     def __init__(self, answer):
-        self.answer, self.requests = answer, []
+        self.answer, self.requests, self.attachments = answer, [], []
 
-    def get(self, key, payload, timeout):
+    def get(self, key, payload, timeout, attachment=None):
         request = decode_message(payload, None, expect=LeaseRequest)
         self.requests.append((key, request))
+        self.attachments.append((payload, attachment))
         reply = self.answer(request)
         return [] if reply is None else [SimpleNamespace(ok=SimpleNamespace(payload=Payload(encode_message(reply))))]
 
@@ -79,3 +80,18 @@ def test_a_refused_release_also_means_not_holding():
     client.ask(StandIn(lambda req: reply(req, True, "alice")), LeaseAction.TAKE)
     client.ask(StandIn(lambda req: reply(req, False, None)), LeaseAction.RELEASE)   # already released in-band
     assert not client.holding
+
+
+def test_with_a_signer_every_query_carries_a_signature_the_controllers_list_verifies(tmp_path):
+    from sharedctl.protocol.keys import lease_key
+    from sharedctl.services.security import credentials
+    from sharedctl.services.security.signing import Signer, TrustList
+
+    site = credentials.generate(tmp_path, operators={"alice": ("r1",)})
+    client = LeaseClient("r1", "alice", "a1", signer=Signer.from_file(site.signing_key("alice"), "alice"))
+    session = StandIn(lambda req: reply(req, True, "alice"))
+    client.ask(session, LeaseAction.TAKE)
+    client.ask(session, LeaseAction.RELEASE)
+    verify = TrustList.from_file(site.trust_file).verifier(lease_key("r1"), "r1")
+    assert [verify(payload, attachment) for payload, attachment in session.attachments] == [("alice", None)] * 2
+    assert LeaseClient("r1", "alice", "a1").signer is None

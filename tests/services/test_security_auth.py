@@ -8,6 +8,7 @@ from __future__ import annotations
 import json
 import os
 import signal
+import stat
 import subprocess
 import sys
 import threading
@@ -19,6 +20,7 @@ import zenoh
 
 from sharedctl.protocol import keys
 from sharedctl.services.security import credentials
+from sharedctl.services.security.signing import TrustList
 from sharedctl.services.security.zenoh_config import client_config, from_file, router_config
 from sharedctl.services.zenoh_session import free_loopback_port
 
@@ -181,6 +183,59 @@ def test_controller_cannot_forge_ground_truth(creds, tcp_router):
     assert got_controller == 0
 
 
+# ----- named operators, each with its robots ----------------------------------------------
+@pytest.fixture(scope="module")
+def named(tmp_path_factory):
+    """A site whose operators have names: alice may command robot1, bob robot2."""
+    site = credentials.generate(tmp_path_factory.mktemp("named"), operators={"alice": (ROBOT,), "bob": ("robot2",)})
+    endpoint = f"tls/127.0.0.1:{free_loopback_port()}"
+    router = _open(router_config(site, [endpoint]))
+    yield site, endpoint
+    router.close()
+
+
+def test_an_operator_reaches_only_its_own_robots_at_the_router(named):
+    """Before, one operator credential and the `*` robot chunk let any operator command every robot on the router."""
+    site, endpoint = named
+    assert _publish_both(site, endpoint, keys.operator_cmd_key(ROBOT), writer_role="alice", intruder_role="bob",
+                         listener_role="controller", n=10) == (10, 0)
+    assert _publish_both(site, endpoint, keys.operator_cmd_key("robot2"), writer_role="bob", intruder_role="alice",
+                         listener_role="controller", n=10) == (10, 0)
+
+
+def test_an_operator_name_with_another_operators_password_is_refused(named):
+    site, endpoint = named
+    assert _refused(_client("alice", site, endpoint, **{"transport/auth/usrpwd/password": site.users["bob"]}))
+
+
+def test_an_operators_password_with_another_operators_certificate_commands_no_robot(named):
+    """TLS checks the certificate's CA, usrpwd the password: the two of different operators get in, but a subject
+    needs the user name *and* the common name, so such a connection matches none and the router drops it all."""
+    site, endpoint = named
+    mixed = _client("alice", site, endpoint, **{"transport/link/tls/connect_certificate": str(site.certificate("bob")),
+                                                "transport/link/tls/connect_private_key": str(site.private_key("bob"))})
+    sessions = [_open(_client("controller", site, endpoint)), _open(mixed), _open(_client("alice", site, endpoint))]
+    listener, intruder, alice = sessions
+    inbox = Inbox()
+    try:
+        subs = [listener.declare_subscriber(keys.operator_cmd_key(robot), inbox) for robot in (ROBOT, "robot2")]
+        probe = alice.declare_publisher(keys.operator_cmd_key(ROBOT))
+        wait_for(lambda: probe.matching_status.matching, 5.0, "the subscription to reach the router")
+        for _ in range(10):
+            for robot in (ROBOT, "robot2"):
+                intruder.put(keys.operator_cmd_key(robot), b"intruder")
+            alice.put(keys.operator_cmd_key(ROBOT), b"alice")
+            time.sleep(0.005)
+        wait_for(lambda: inbox.count(b"alice") == 10, 5.0, "alice's samples")
+        time.sleep(0.3)
+        assert inbox.count(b"intruder") == 0
+        for entity in (probe, *subs):
+            entity.undeclare()
+    finally:
+        for session in sessions:
+            session.close()
+
+
 # ----- mutual TLS ---------------------------------------------------------------
 def test_mtls_client_with_its_certificate_connects(creds, tls_router):
     session = _open(_client("operator", creds, tls_router))
@@ -226,6 +281,10 @@ def test_make_credentials_writes_a_site_that_sharedctl_router_enforces(tmp_path)
     assert made.returncode == 0, made.stderr
     assert sorted(p.name for p in site.glob("*.json5")) == ["controller.json5", "observer.json5", "operator.json5",
                                                           "robot.json5", "router.json5"]
+    # the operator's signing key is its own; the controller's list of trusted operators is public
+    assert stat.S_IMODE((site / "operator.signing-key.pem").stat().st_mode) == 0o600
+    assert stat.S_IMODE((site / "operators.toml").stat().st_mode) == 0o644
+    assert set(TrustList.from_file(site / "operators.toml").operators) == {"operator"}
     # the router module alone (`sharedctl router` runs the same `run`, after importing every sub-command)
     proc = subprocess.Popen([sys.executable, "-m", "sharedctl.services.security.router_command", "--config",
                              str(site / "router.json5"), "--duration", "60"],

@@ -32,3 +32,27 @@ def test_the_secured_stack_meets_a_router_restart_a_controller_restart_and_an_es
     restarted = summary["processes"]["controller"]["summary"]
     assert restarted["start"].startswith("resumed from a checkpoint") and restarted["mode"] == "estopped"
     assert summary["security"]["credentials_removed"] is True
+
+
+def test_behind_the_router_unsigned_floods_and_a_replayed_signed_command_move_nothing(tmp_path):
+    """The operator credential at the router is not enough: commands must be signed by an operator the controller
+    trusts. A flood and 200 junk sessions sent with the router credential but no operator key are refused as
+    `unsigned` before any session state is touched; the holder's captured signed command, replayed, is a duplicate.
+    The console (signing) keeps control throughout."""
+    out = tmp_path / "demo.json"
+    argv = [sys.executable, "-m", "sharedctl.services.cli", "demo", "--secure", "--headless", "--no-reference",
+            "--scenario", "adversarial_wall", "--duration", "3.5", "--json", str(out), "--log-dir", str(tmp_path / "l"),
+            "--feedback-timeout-ms", "150", "--fault", "operator.flood_at=1,500,1", "--fault", "operator.evict_at=2.5"]
+    proc = subprocess.run(argv, stdin=subprocess.DEVNULL, capture_output=True, text=True, timeout=180)
+    summary = json.loads(out.read_text())
+    assert summary["failure"] is None and summary["violations"] == 0, proc.stderr
+    flood, evict = (summary["injected"]["intrusions"][k] for k in ("flood", "evict"))
+    assert evict["replayed"] is True
+    rejections = summary["processes"]["controller"]["summary"]["rejections"]
+    # on the code before operator identity, the flood's sessions were judged as operators (not_holder, rate_limited)
+    assert rejections.get("unsigned", 0) == flood["commands"] + evict["sessions"], rejections
+    assert rejections.get("duplicate_seq", 0) + rejections.get("out_of_order_seq", 0) >= 1, rejections
+    assert not {"not_holder", "rate_limited", "identity_mismatch", "bad_signature"} & set(rejections), rejections
+    assert summary["estops"] == 0
+    controller = summary["processes"]["controller"]["summary"]
+    assert controller["commands_accepted"] >= 0.7 * 50 * 3.5      # the console drove, signed, all along (50 Hz)
