@@ -146,9 +146,9 @@ def run(args) -> int:
     try:
         recording = open_demo_recording(args.record, args.robot_id, scenario_arg, scenario.name, can_controller,
                                         seed=None if faults.empty else faults.plan.seed)   # docs/recording.md
-        faults.start(controller_ep, args.robot_id, log_dir, backstop, start_child, wait_listening)
         secure.start(log_dir, backstop, wait_listening, args.robot_id,
                      (OPERATOR, ESTOP_OPERATOR) if faults.sends_estop else (OPERATOR,))
+        faults.start(controller_ep, args.robot_id, log_dir, backstop, start_child, secure.relay_args())
         children["robot"] = start_child("robot", ["robot", "--scenario", scenario_arg,
                                                   *secure.zenoh_args("robot", ["--zenoh-listen", robot_ep]), *can_robot,
                                                   *faults.robot_arguments(),

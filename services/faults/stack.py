@@ -148,8 +148,9 @@ class FaultStack:
         return argv + (["--origin-file", str(self.origin_file)] if self.origin_file is not None else [])
 
     def start(self, controller_ep: str, robot_id: str, log_dir: Path,
-              backstop: str, start_child, wait_listening) -> None:
-        """Start the relay and/or the gateway (before the robot, console and controller)."""
+              backstop: str, start_child, relay_zenoh: list[str] | None = None) -> None:
+        """Start the relay and/or the gateway (before the robot, console and controller); `relay_zenoh`: the relay's
+        Zenoh arguments behind the --secure routers (its two client configurations) instead of listen/connect."""
         self.origin_file = log_dir / "fault-origin.json"
         self.origin_file.unlink(missing_ok=True)
         if self.can_ports is not None:
@@ -170,11 +171,18 @@ class FaultStack:
         if self.relay_endpoint is not None:
             stats = log_dir / "fault-relay.json"
             self.stats_files["relay"] = stats
+            ready = log_dir / "fault-relay.ready"
+            ready.unlink(missing_ok=True)
+            zenoh_args = relay_zenoh or ["--listen", self.relay_endpoint, "--connect", controller_ep]
             self.infra["relay"] = start_child("fault-relay", [
-                "fault-relay", "--listen", self.relay_endpoint, "--connect", controller_ep, "--robot-id", robot_id,
-                *self.fault_argv(), "--stats", str(stats), "--duration", backstop], log_dir)
-            if not wait_listening(self.relay_endpoint, self.infra["relay"], READY_TIMEOUT):
-                raise RuntimeError(f"the Zenoh fault relay did not come up on {self.relay_endpoint}")
+                "fault-relay", *zenoh_args, "--robot-id", robot_id, *self.fault_argv(), "--stats", str(stats),
+                "--ready", str(ready), "--duration", backstop], log_dir)
+            deadline = time.monotonic() + READY_TIMEOUT
+            while not ready.exists():
+                if self.infra["relay"].popen.poll() is not None or time.monotonic() > deadline:
+                    raise RuntimeError("the Zenoh fault relay did not come up"
+                                       + ("" if relay_zenoh else f" on {self.relay_endpoint}"))
+                time.sleep(0.05)
 
     # ----- during the run ------------------------------------------------------
     def robot_arguments(self) -> list[str]:

@@ -12,6 +12,17 @@ path between the console and the controller with two sessions:
 * telemetry direction (controller → console): ``…/state``, ``…/events`` and ``…/alive/*``
   through the ``telemetry.*`` pipeline.
 
+Attachments travel with their payloads (an operator's signature, protocol/README.md §2.6): a
+message the pipeline delays, duplicates or replays keeps its own, a corrupted one keeps the
+original's (so a controller that verifies refuses it as `bad_signature`).
+
+Behind the ``--secure`` router each side is a client of a router instead (``--console-config``,
+``--controller-config``: Zenoh configuration files): the console's own router on one side, as the
+controller role (which receives operator commands and answers lease queries there); the site
+router on the other, as the console's operator (which may put its commands and ask for the lease):
+
+    console ─▶ console router ◀─ relay (controller role) · relay (the operator) ─▶ site router ◀─ controller
+
 Liveliness tokens are not mirrored (no process of this project watches them through the relay
 today); the periodic ``alive`` heartbeats are.
 
@@ -48,11 +59,13 @@ import zenoh
 from sharedctl.protocol import keys
 
 from ..lifecycle import StopFlag
+from ..security.zenoh_config import ZenohConfigError, open_from_file
 from ..zenoh_session import EndpointError, check_loopback, open_session
 from .impairments import Pipeline
 from .spec import FaultSpecError, parse, pipeline
 
 QUERY_TIMEOUT = 2.0     # s a forwarded lease query waits for the controller
+ATTACHMENTS_KEPT = 512  # payloads whose attachment is remembered (a replayed or duplicated payload keeps its own)
 MAX_ORIGIN_AGE = 5.0    # s: an origin further back than this (or in the future) is not this run's; arming is t = 0
 
 
@@ -96,8 +109,15 @@ class Direction:
 class ZenohRelay:
     """Two sessions and a release scheduler; `start()`, `arm()`, `stop()`, `report()`."""
 
-    def __init__(self, listen: str, connect: str, robot: str, operator: Pipeline, telemetry: Pipeline) -> None:
-        self.listen, self.connect, self.robot = check_loopback(listen), check_loopback(connect), robot
+    def __init__(self, listen: str | None, connect: str | None, robot: str, operator: Pipeline, telemetry: Pipeline,
+                 console_config: str | None = None, controller_config: str | None = None) -> None:
+        if (listen is None) == (console_config is None) or (connect is None) == (controller_config is None):
+            raise ValueError("each side needs an endpoint or a Zenoh configuration file, not both")
+        self.listen = None if listen is None else check_loopback(listen)
+        self.connect = None if connect is None else check_loopback(connect)
+        self.robot = robot
+        self.configs = {"console": console_config, "controller": controller_config}
+        self.attachments: dict[bytes, bytes] = {}   # payload -> its attachment, the last ATTACHMENTS_KEPT
         self.directions = {"operator": Direction("operator", operator), "telemetry": Direction("telemetry", telemetry)}
         self.cond = threading.Condition()
         self.heap: list = []
@@ -114,9 +134,11 @@ class ZenohRelay:
 
     # ----- set-up ------------------------------------------------------------
     def start(self) -> "ZenohRelay":
-        console_side = open_session(listen=[self.listen])
-        controller_side = open_session(connect=[self.connect])
-        self.sessions = {"console": console_side, "controller": controller_side}
+        console_side = self.sessions["console"] = (open_from_file(self.configs["console"]) if self.configs["console"]
+                                                   else open_session(listen=[self.listen]))
+        controller_side = self.sessions["controller"] = (
+            open_from_file(self.configs["controller"]) if self.configs["controller"]
+            else open_session(connect=[self.connect]))
         remote = zenoh.Locality.REMOTE
         prefix = f"{keys.PREFIX}/{self.robot}"
         self.entities = [
@@ -161,7 +183,9 @@ class ZenohRelay:
 
     def report(self) -> dict:
         with self.cond:
-            return {"kind": "zenoh-relay", "listen": self.listen, "connect": self.connect, "armed": self.t0 is not None,
+            return {"kind": "zenoh-relay", "listen": self.listen, "connect": self.connect,
+                    "through_routers": {side: path is not None for side, path in self.configs.items()},
+                    "armed": self.t0 is not None,
                     "armed_late_s": self.armed_late,
                     "pending": len(self.heap), "queries": dict(self.queries),
                     **{name: d.report() for name, d in self.directions.items()}}
@@ -170,18 +194,24 @@ class ZenohRelay:
     def _on_sample(self, direction: str, sample) -> None:
         key = str(sample.key_expr)
         payload = sample.payload.to_bytes()
+        attachment = None if sample.attachment is None else sample.attachment.to_bytes()
         d = self.directions[direction]
         with self.cond:
             now = time.monotonic()
             seq = next(self.seq[direction])
             impaired = self.t0 is not None
+            if attachment is not None:
+                self.attachments[payload] = attachment
+                if len(self.attachments) > ATTACHMENTS_KEPT:
+                    del self.attachments[next(iter(self.attachments))]
             if not impaired:
                 d.passed_unarmed += 1
                 items = [(now, payload)]
             else:
                 items = [(self.t0 + release, data) for release, data in d.pipe.feed(now - self.t0, payload)]
             for release, data in items:
-                heapq.heappush(self.heap, (release, next(self.order), direction, key, data, now, seq, impaired))
+                extra = self.attachments.get(data, attachment)      # a replayed payload carries its own
+                heapq.heappush(self.heap, (release, next(self.order), direction, key, data, now, seq, impaired, extra))
             if items:
                 self.cond.notify()
 
@@ -193,10 +223,11 @@ class ZenohRelay:
                     self.cond.wait(timeout)
                 if not self.running:
                     return
-                _, _, direction, key, data, arrival, seq, impaired = heapq.heappop(self.heap)
-            self._publish(direction, key, data, arrival, seq, impaired)
+                _, _, direction, key, data, arrival, seq, impaired, attachment = heapq.heappop(self.heap)
+            self._publish(direction, key, data, arrival, seq, impaired, attachment)
 
-    def _publish(self, direction: str, key: str, data: bytes, arrival: float, seq: int, impaired: bool) -> None:
+    def _publish(self, direction: str, key: str, data: bytes, arrival: float, seq: int, impaired: bool,
+                 attachment: bytes | None = None) -> None:
         """Send on the other session; the latency is measured only for messages the pipeline held (a
         message that arrived before arming passes at once, even when it arrived after the run's t = 0)."""
         d = self.directions[direction]
@@ -205,7 +236,7 @@ class ZenohRelay:
             pub = self.publishers.get(key)
             if pub is None:
                 pub = self.publishers[key] = session.declare_publisher(key)
-            pub.put(data)
+            pub.put(data, attachment=attachment)
         except Exception:  # noqa: BLE001 — a failed put is counted, never fatal
             d.publish_errors += 1
             return
@@ -227,7 +258,9 @@ class ZenohRelay:
         """Ask the controller side the same query and hand every reply back (unimpaired)."""
         try:
             payload = query.payload.to_bytes() if query.payload is not None else None
-            replies = self.sessions["controller"].get(str(query.selector), payload=payload, timeout=QUERY_TIMEOUT)
+            attachment = query.attachment.to_bytes() if query.attachment is not None else None
+            replies = self.sessions["controller"].get(str(query.selector), payload=payload, attachment=attachment,
+                                                      timeout=QUERY_TIMEOUT)
             with self.cond:
                 self.queries["forwarded"] += 1
             for reply in replies:
@@ -256,9 +289,17 @@ def add_parser(subparsers) -> None:
                               help="Zenoh relay that injects operator.*/telemetry.* faults (demo --fault)",
                               description="Zenoh relay between console (--listen) and controller (--connect) "
                                           "that impairs operator.* and telemetry.* streams.")
-    p.add_argument("--listen", required=True, metavar="ENDPOINT",
-                   help="where the console connects (tcp/127.0.0.1:PORT)")
-    p.add_argument("--connect", required=True, metavar="ENDPOINT", help="the controller's endpoint")
+    console = p.add_mutually_exclusive_group(required=True)
+    console.add_argument("--listen", metavar="ENDPOINT", help="where the console connects (tcp/127.0.0.1:PORT)")
+    console.add_argument("--console-config", metavar="FILE",
+                         help="instead: a Zenoh configuration of a client of the console's router (as the controller "
+                              "role, behind --secure)")
+    controller = p.add_mutually_exclusive_group(required=True)
+    controller.add_argument("--connect", metavar="ENDPOINT", help="the controller's endpoint")
+    controller.add_argument("--controller-config", metavar="FILE",
+                            help="instead: a Zenoh configuration of a client of the controller's router (as the "
+                                 "console's operator, behind --secure)")
+    p.add_argument("--ready", metavar="FILE", help="touch FILE once both sessions are open and declared")
     p.add_argument("--robot-id", default="robot1")
     add_fault_arguments(p)
     p.add_argument("--arm-on-signal", action="store_true", help="faults act from SIGUSR1 on (default: from the start)")
@@ -290,14 +331,21 @@ def run(args) -> int:
         plan = parse(args.fault, args.fault_seed)
         keys.check_robot_id(args.robot_id)
         relay = ZenohRelay(args.listen, args.connect, args.robot_id, pipeline(plan, "operator"),
-                           pipeline(plan, "telemetry"))
-    except (FaultSpecError, EndpointError, ValueError) as exc:
+                           pipeline(plan, "telemetry"), args.console_config, args.controller_config)
+    except (FaultSpecError, EndpointError, ZenohConfigError, ValueError) as exc:
         print(f"sharedctl fault-relay: {exc}", file=sys.stderr)
         return 2
     signal.signal(signal.SIGUSR1, lambda *_: relay.arm(origin_monotonic(args.origin_file)))
     if not args.arm_on_signal:
         relay.arm()
-    relay.start()
+    try:
+        relay.start()
+    except Exception as exc:  # noqa: BLE001 — ZenohConfigError, or zenoh.ZError: a router that refuses the relay
+        print(f"sharedctl fault-relay: cannot open its sessions: {exc}", file=sys.stderr)
+        relay.stop()
+        return 1
+    if args.ready:
+        Path(args.ready).touch()
     deadline = None if args.duration is None else time.monotonic() + args.duration
     try:
         while not stop.stopped and (deadline is None or time.monotonic() < deadline):

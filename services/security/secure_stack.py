@@ -26,8 +26,12 @@ this robot only at the router; the controller runs with `--operators` (their pub
 console with `--signing-key`, so every command and lease request that drives is signed, and the
 lease is held by a verified identity.
 
-With ``--fault``: every fault but the Zenoh link faults (``operator.*``/``telemetry.*``
-impairments, whose relay is a plain peer between console and controller). Faults that publish
+With ``--fault``: every fault. The Zenoh link faults (``operator.*``/``telemetry.*`` impairments)
+need the relay in the only path between console and controller: the console then connects to a
+router of its own (`console_endpoint`, the same credentials and rules), and the relay is a client
+of both — of the console's router as the controller role, of the site router as the console's
+operator (`relay_args`) — so every message still passes two authenticating, access-controlled
+routers, and the operator's signatures pass the relay untouched. Faults that publish
 operator commands (``operator.estop_at``, ``flood_at``, ``evict_at``) do so on a session of the
 operator role (`operator_session`); the estop signed by its own operator (`signer`), the flood and
 the junk sessions of the eviction unsigned (an intruder with the router's credentials but no
@@ -91,6 +95,8 @@ class SecureStack:
     operator: object | None = None                    # an operator-role session for the faults that publish
     log_dir: Path | None = None
     backstop: str = ""
+    console_endpoint: str | None = None               # the console's own router (link faults: the relay between)
+    console_router: object | None = None              # its children.Child
     bounced: list = field(default_factory=list)       # routers killed on purpose (router.restart_at)
 
     @classmethod
@@ -101,11 +107,10 @@ class SecureStack:
             if bounces:
                 raise ValueError("router.restart_at needs --secure (without it there is no router)")
             return cls()
-        if faults is not None and faults.needs_relay:
-            raise ValueError("--secure with operator.*/telemetry.* link faults is not supported (their relay is a "
-                             "plain peer between console and controller); every other fault is")
         endpoint = check_endpoint(args.zenoh_listen) if args.zenoh_listen else f"tls/127.0.0.1:{free_port()}"
-        return cls(enabled=True, endpoint=endpoint)
+        console = f"{endpoint.split('/', 1)[0]}/127.0.0.1:{free_port()}" if faults is not None and faults.needs_relay \
+            else None
+        return cls(enabled=True, endpoint=endpoint, console_endpoint=console)
 
     # ----- the run ---------------------------------------------------------------
     def start(self, log_dir: Path, backstop: str, wait_listening, robot_id: str = "robot1",
@@ -124,6 +129,19 @@ class SecureStack:
                                               client_config(name, self.creds, [self.endpoint]), f"demo {name}")
         self.log_dir, self.backstop, self.wait_listening = log_dir, backstop, wait_listening
         self.router = _start_router(["--config", str(self.configs["router"]), "--duration", backstop], log_dir)
+        if self.console_endpoint is not None:
+            ep = [self.console_endpoint]
+            self.configs["console-router"] = write_config(self.directory / "console-router.json5",
+                                                          router_config(self.creds, ep), "the console's router")
+            self.configs["console"] = write_config(self.directory / "console.json5",
+                                                   client_config(OPERATOR, self.creds, ep), "console via the relay")
+            self.configs["relay-console-side"] = write_config(self.directory / "relay-console-side.json5",
+                                                              client_config("controller", self.creds, ep),
+                                                              "the relay on the console's router")
+            self.console_router = _start_router(["--config", str(self.configs["console-router"]),
+                                                 "--duration", backstop], log_dir, "console-router")
+            if not wait_listening(self.console_endpoint, self.console_router, READY_TIMEOUT):
+                raise RuntimeError(f"the console's router did not come up on {self.console_endpoint}")
         if not wait_listening(self.endpoint, self.router, READY_TIMEOUT):
             raise RuntimeError(f"router did not come up on {self.endpoint}")
         self.session = open_from_file(self.configs["observer"])
@@ -158,7 +176,15 @@ class SecureStack:
             return plain
         identity = {"operator": ["--operator-id", OPERATOR, "--signing-key", str(self.creds.signing_key(OPERATOR))],
                     "controller": ["--operators", str(self.creds.trust_file)]}.get(role, [])
-        return ["--zenoh-config", str(self.configs[OPERATOR if role == "operator" else role]), *identity]
+        config = role if role != "operator" else "console" if self.console_endpoint is not None else OPERATOR
+        return ["--zenoh-config", str(self.configs[config]), *identity]
+
+    def relay_args(self) -> list[str] | None:
+        """The fault relay's Zenoh arguments behind the routers (None when not secure)."""
+        if not self.enabled or self.console_endpoint is None:
+            return None
+        return ["--console-config", str(self.configs["relay-console-side"]),
+                "--controller-config", str(self.configs[OPERATOR])]
 
     def wait_up(self, role: str, robot_id: str, child, timeout: float, plain_wait) -> bool:
         """Secure: the role's liveliness token is visible through the router; else `plain_wait()`."""
@@ -184,15 +210,17 @@ class SecureStack:
             self.session.close()     # the demo closes it, unless the run failed before using it
         if self.operator is not None and not self.operator.is_closed():
             self.operator.close()
-        if self.router is not None:
-            self.router.stop()
+        for router in (self.router, self.console_router):
+            if router is not None:
+                router.stop()
         if self.directory is not None:
             shutil.rmtree(self.directory, ignore_errors=True)
 
     # ----- the summary -----------------------------------------------------------
     @property
     def clean(self) -> bool:
-        return not self.enabled or (self.router is not None and self.router.clean)
+        return not self.enabled or (self.router is not None and self.router.clean
+                                    and (self.console_router is None or self.console_router.clean))
 
     def summary(self, rec) -> dict:
         """`security` and `rejected_messages` for the demo's JSON (nothing when not secure)."""
@@ -212,6 +240,7 @@ class SecureStack:
                                      f"(operators: {', '.join(self.creds.operators)})",
                 "roles": {"robot": "robot", "controller": "controller", "console": "operator", "demo": "observer"},
                 "router": self.router.report() if self.router is not None else None,
+                "console_router": self.console_router.report() if self.console_router is not None else None,
                 "routers_killed_on_purpose": [r.report() for r in self.bounced],
                 "acl_denials_counted": False,
                 "undecodable_at_demo": rec.rejected,

@@ -16,17 +16,19 @@ from .zenoh_fakes import Sample
 class _Publisher:
     def __init__(self) -> None:
         self.sent: list[bytes] = []
+        self.attachments: list[bytes | None] = []
 
-    def put(self, data: bytes) -> None:
+    def put(self, data: bytes, attachment: bytes | None = None) -> None:
         self.sent.append(data)
+        self.attachments.append(attachment)
 
 
 def _drain(relay: ZenohRelay) -> None:
     """Release every queued message at its release time (the scheduler thread's work, in line)."""
     while relay.heap:
-        release, _, direction, key, data, arrival, seq, impaired = heapq.heappop(relay.heap)
+        release, _, direction, key, data, arrival, seq, impaired, attachment = heapq.heappop(relay.heap)
         time.sleep(max(0.0, release - time.monotonic()))
-        relay._publish(direction, key, data, arrival, seq, impaired)
+        relay._publish(direction, key, data, arrival, seq, impaired, attachment)
 
 
 def test_messages_before_arming_do_not_dilute_the_measured_delay():
@@ -49,3 +51,22 @@ def test_messages_before_arming_do_not_dilute_the_measured_delay():
     assert len(publisher.sent) == 10 and report["delivered"] == 10 and report["passed_before_arming"] == 5
     assert report["latency_ms_mean"] >= delay * 1000
     assert report["latency_ms_max"] < delay * 1000 + 500      # loose: only that it is the delay, not a stall
+
+
+def test_an_attachment_travels_with_its_payload_and_a_replayed_payload_keeps_its_own():
+    """An operator's signature is an attachment: a duplicated or replayed command must carry the signature of the
+    command it copies, or a controller that verifies would refuse a copy the link made."""
+    plan = parse(["operator.duplicate=1", "operator.replay=1,20"], 3)
+    relay = ZenohRelay("tcp/127.0.0.1:1", "tcp/127.0.0.1:2", "robot1", pipeline(plan, "operator"),
+                       pipeline(plan, "telemetry"))
+    key = "sharedctl/robot1/operator/cmd"
+    publisher = relay.publishers[key] = _Publisher()
+    relay.sessions = {"controller": None, "console": None}
+    relay.arm()
+    for i in range(8):
+        relay._on_sample("operator", Sample(b"cmd%d" % i, key, attachment=b"sig%d" % i))
+        time.sleep(0.01)
+    _drain(relay)
+    pairs = list(zip(publisher.sent, publisher.attachments))
+    assert len(pairs) > 8 and relay.report()["operator"]["replayed"] > 0
+    assert all(attachment == b"sig" + data[3:] for data, attachment in pairs), pairs

@@ -56,3 +56,30 @@ def test_behind_the_router_unsigned_floods_and_a_replayed_signed_command_move_no
     assert summary["estops"] == 0
     controller = summary["processes"]["controller"]["summary"]
     assert controller["commands_accepted"] >= 0.7 * 50 * 3.5      # the console drove, signed, all along (50 Hz)
+
+
+def test_link_faults_behind_the_routers_reach_the_controller_with_every_message_accounted_for(tmp_path):
+    """Before, `--secure` refused the operator.*/telemetry.* faults (their relay was a plain peer). Now the console has
+    a router of its own and the relay is a client of both, so the impairments run against the secured stack: every
+    command the relay delivered was either accepted or refused for a reason, the signatures passed the relay (nothing
+    `unsigned`), a corrupted command is refused on its signature before it is decoded, a replayed or duplicated one
+    (validly signed) by the replay guard."""
+    out = tmp_path / "demo.json"
+    argv = [sys.executable, "-m", "sharedctl.services.cli", "demo", "--secure", "--headless", "--no-reference",
+            "--scenario", "adversarial_wall", "--duration", "3", "--json", str(out), "--log-dir", str(tmp_path / "l"),
+            "--feedback-timeout-ms", "150", "--fault", "operator.corrupt=0.2", "--fault", "operator.replay=0.2,300",
+            "--fault", "operator.duplicate=0.2", "--fault", "telemetry.delay_ms=30", "--fault", "telemetry.loss=0.1"]
+    proc = subprocess.run(argv, stdin=subprocess.DEVNULL, capture_output=True, text=True, timeout=180)
+    summary = json.loads(out.read_text())
+    assert summary["failure"] is None and summary["violations"] == 0, proc.stderr
+    assert summary["security"]["console_router"]["exit_code"] == 0
+    relay = summary["injected"]["relay"]
+    assert relay["through_routers"] == {"console": True, "controller": True}
+    operator, telemetry = relay["operator"], relay["telemetry"]
+    assert operator["corrupted"] > 0 and operator["replayed"] > 0 and telemetry["lost"] > 0
+    controller = summary["processes"]["controller"]["summary"]
+    rejections = controller["rejections"]
+    assert sum(rejections.values()) + controller["commands_accepted"] == operator["delivered"], rejections
+    assert rejections["bad_signature"] >= operator["corrupted"], rejections
+    assert set(rejections) <= {"bad_signature", "duplicate_seq", "out_of_order_seq", "stale"}, rejections
+    assert controller["commands_accepted"] >= 0.6 * 50 * 3

@@ -1,5 +1,5 @@
-"""A Zenoh sample as a subscriber's callback sees it (its key and its payload's bytes), for tests that
-call the callbacks directly, without a session."""
+"""A Zenoh sample as a subscriber's callback sees it (its key, its payload's bytes and its attachment), for tests
+that call the callbacks directly, without a session."""
 from __future__ import annotations
 
 
@@ -12,5 +12,6 @@ class Payload:
 
 
 class Sample:
-    def __init__(self, data: bytes, key: str = "") -> None:
+    def __init__(self, data: bytes, key: str = "", attachment: bytes | None = None) -> None:
         self.key_expr, self.payload = key, Payload(data)
+        self.attachment = None if attachment is None else Payload(attachment)

@@ -96,7 +96,9 @@ def test_full_plan_puts_kills_hangs_up_to_the_watchdog_and_estops_at_every_tenth
 
 def test_the_quick_plan_is_unchanged_by_the_new_envelope_and_meets_each_intruder_once():
     ids = [c.id for c in cp.plan(quick=True)]
-    assert len(ids) == 24 and "adversarial_wall|controller.kill_at=1.9|4s" in ids
+    assert len(ids) == 25 and "adversarial_wall|controller.kill_at=1.9|4s" in ids
+    secure = [c for c in cp.plan(quick=True) if c.secure]       # the secured stack meets a link fault too
+    assert len(secure) == 1 and any(f.startswith("operator.") for f in secure[0].faults)
     assert not any("estop_at" in i or "can.delay_ms=25" in i for i in ids)
     for key in ("controller.restart_at", "robot.reboot_at", "can.intruder_at", "operator.flood_at",
                 "operator.evict_at"):

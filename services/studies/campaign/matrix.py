@@ -137,7 +137,7 @@ def plan(quick: bool = False) -> list[Case]:
     def add(name, cases):
         families.setdefault(name, []).extend(cases)
 
-    if quick:   # 20 short runs; several faults share a run where they act on different things
+    if quick:   # 25 short runs; several faults share a run where they act on different things
         q = 4.0
         add("none", _cases(A, [()], q) + _cases(P, [()], q))
         add("operator", _cases(A, [["operator.delay_ms=300"], ["operator.loss=0.3", "operator.burst=0.2,0.2"],
@@ -154,6 +154,8 @@ def plan(quick: bool = False) -> list[Case]:
         add("intruders", _cases(A, [["controller.kill_at=1.9", "controller.restart_at=2.9"], ["robot.reboot_at=2.2"],
                                     ["can.intruder_at=2.2"], ["operator.flood_at=1,2000,1", "operator.evict_at=2.5"]],
                                 q))
+        add("secure", _cases(A, [["router.restart_at=1.5", "operator.delay_ms=100", "operator.corrupt=0.2"]], q,
+                             secure=True))
         return _interleave(families)
 
     delays = (0, 100, 200, 300, 500, 750, 1000)
@@ -228,8 +230,14 @@ def plan(quick: bool = False) -> list[Case]:
         + _cases(P, [["operator.evict_at=2"]]))
     add("secure", _cases(A, [(), ["router.restart_at=1.5"], ["router.restart_at=2.5,2"],
                              ["controller.kill_at=2.3", "controller.restart_at=3.3"], ["can.intruder_at=2.2"],
-                             ["operator.estop_at=2.4"], ["can.delay_ms=10", "can.loss=0.1"]], secure=True)
-        + _cases(P, [["router.restart_at=2"]], secure=True))
+                             ["operator.estop_at=2.4"], ["can.delay_ms=10", "can.loss=0.1"],
+                             # the link faults, through the relay between the console's router and the site's
+                             ["operator.delay_ms=300", "operator.loss=0.3"],
+                             ["operator.corrupt=0.2", "operator.replay=0.3", "operator.duplicate=0.3"],
+                             ["telemetry.delay_ms=300", "telemetry.loss=0.3"],
+                             ["operator.flood_at=1,2000,1", "operator.evict_at=2.5"]], secure=True)
+        + _cases(A, [["operator.blackout=1.5,5"]], 7.5, secure=True)
+        + _cases(P, [["router.restart_at=2"], ["operator.delay_ms=300", "operator.loss=0.3"]], secure=True))
     add("combined", _cases(A, [["operator.delay_ms=300", "can.loss=0.05"], ["operator.loss=0.5", "can.delay_ms=5"],
                                ["operator.burst=0.2,0.2", "telemetry.delay_ms=300", "can.loss=0.05"],
                                ["operator.delay_ms=500", "console.kill_at=3.0"]])
