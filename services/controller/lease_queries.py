@@ -11,8 +11,8 @@ its timeout to learn why. Refusals are counted by reason, prefixed `lease_`:
 query first needs a valid signature over this robot's lease key and the payload by an operator
 trusted for this robot, and the request's `operator_id` must be the signer's: otherwise
 `lease_unsigned`, `lease_bad_attachment`, `lease_unknown_operator`, `lease_not_permitted`,
-`lease_bad_signature` or `lease_identity_mismatch`, refused before the replay guard or the
-rate limit see it.
+`lease_bad_signature` or `lease_identity_mismatch`, refused (the reply names the reason and
+answers the request's seq) before the replay guard or the rate limit see it.
 """
 from __future__ import annotations
 
@@ -33,12 +33,6 @@ def answer(payload: bytes, lease: OperatorLease, guard: ReplayGuard, rejections:
            verify=None) -> LeaseReply:
     """The reply to one lease query received at `now` (s, monotonic) / `wall_now` (s, wall clock); `limit`: the
     queries' rate per session; `verify`: (payload, attachment) -> (signer, reason), or None (no identity)."""
-    signer = None
-    if verify is not None:
-        signer, reason = verify(payload, attachment)
-        if reason is not None:
-            rejections[f"lease_{reason}"] += 1
-            return _reply(0, wall_now, False, lease, now, f"request refused: {reason}")
     try:
         request = decode_message(bytes(payload), None, expect=LeaseRequest)
     except ProtocolError as exc:
@@ -47,9 +41,13 @@ def answer(payload: bytes, lease: OperatorLease, guard: ReplayGuard, rejections:
     except Exception as exc:  # noqa: BLE001 — a bad payload never escapes the queryable
         rejections[f"lease_unexpected_{type(exc).__name__}"] += 1
         return _reply(0, wall_now, False, lease, now, "malformed lease request")
-    if signer is not None and request.operator_id != signer:
-        rejections["lease_identity_mismatch"] += 1
-        return _reply(request.seq, wall_now, False, lease, now, "request refused: identity_mismatch")
+    if verify is not None:         # decoded first only to answer the request's seq: the console learns why
+        signer, reason = verify(payload, attachment)
+        if reason is None and request.operator_id != signer:
+            reason = "identity_mismatch"
+        if reason is not None:
+            rejections[f"lease_{reason}"] += 1
+            return _reply(request.seq, wall_now, False, lease, now, f"request refused: {reason}")
     key = f"{request.operator_id}/{request.session_id}"
     reason = guard.admit(key, request.seq, request.time, now, wall_now)
     if reason is None and limit is not None and not limit.admit(key, now):
