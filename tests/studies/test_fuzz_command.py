@@ -38,7 +38,7 @@ def test_clean_campaign_exits_zero():
 def test_summary_table_has_one_row_per_decoder_with_zero_escapes():
     _, text = run(["fuzz", "--count", "300"])
     rows = [line for line in text.splitlines() if line.startswith("│")]
-    assert [row.split("│")[1].strip() for row in rows] == ["can", "message", "key"]
+    assert [row.split("│")[1].strip() for row in rows] == ["can", "message", "key", "attachment"]
 
 
 def test_summary_table_reports_the_input_count():
