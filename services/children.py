@@ -53,9 +53,18 @@ class Child:
         return "\n".join(self.log.read_text(errors="replace").splitlines()[-lines:])
 
 
+def python_module(module: str) -> list[str]:
+    """The command line that runs `module` of the *installed* package with this interpreter.
+
+    `-P` (Python 3.11): `-m` would otherwise put the working directory first on the import path, and
+    from a source tree (or the image's WORKDIR, which holds copies of the source folders) the
+    folder `sharedctl/`, which has no `services/`, would hide the installed package."""
+    return [sys.executable, "-P", "-m", module]
+
+
 def start_child(name: str, argv: list[str], log_dir: Path, interactive: bool = False) -> Child:
-    """`python -m sharedctl.services.cli ARGV` in its own session (a terminal's Ctrl-C reaches only the demo)."""
-    cmd = [sys.executable, "-m", "sharedctl.services.cli", *argv]
+    """`python -P -m sharedctl.services.cli ARGV` in its own session (a terminal's Ctrl-C reaches only the demo)."""
+    cmd = [*python_module("sharedctl.services.cli"), *argv]
     env = dict(os.environ, PYTHONUNBUFFERED="1")
     if interactive:
         popen = subprocess.Popen(cmd, env=env, start_new_session=True)

@@ -8,12 +8,15 @@ unknown command import them all.
 
 The processes need only the runtime dependencies; some studies need a module that comes with an
 extra of pyproject.toml (EXTRAS). A command whose module, or whose run, finds that module missing
-stops with a message naming the extra to install, and ``--help`` still lists every command.
+stops with a message naming the extra to install, and ``--help`` still lists every command. Any
+other module that cannot be imported — one of this project's, or a runtime dependency — is a broken
+installation: `main` says which, for which command, and exits 3 (never a silently shorter list).
 """
 from __future__ import annotations
 
 import argparse
 import importlib
+import importlib.metadata
 import sys
 
 COMMANDS = {
@@ -76,6 +79,7 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
         prog="sharedctl",
         description="Shared-control teleoperation: simulation, services and tools.",
     )
+    parser.add_argument("--version", action="version", version=f"sharedctl {version()}")
     subparsers = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     parser.unavailable = {}     # command -> why it cannot run here (its extra is not installed)
     modules = [COMMANDS[command]] if command in COMMANDS else list(dict.fromkeys(COMMANDS.values()))
@@ -87,18 +91,38 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
                 for name in (n for n, m in COMMANDS.items() if m == module_name):
                     parser.unavailable[name] = _add_unavailable(subparsers, name, exc)
                 continue
-            if exc.name is None or not module_name.startswith(exc.name):
-                raise
-            continue    # a command not built yet must not break the others
+            raise IncompleteInstall(module_name, exc) from exc
         module.add_parser(subparsers)
     return parser
+
+
+class IncompleteInstall(RuntimeError):
+    """A module of this project (or a runtime dependency) that the installation lacks: a packaging mistake, said
+    loudly instead of leaving the command out of the list."""
+
+    def __init__(self, module_name: str, exc: ModuleNotFoundError) -> None:
+        commands = ", ".join(n for n, m in COMMANDS.items() if m == module_name)
+        super().__init__(f"this installation cannot import {exc.name!r} (needed by `sharedctl {commands}`, "
+                         f"module {module_name}): reinstall sharedctl, or install its runtime dependencies")
+
+
+def version() -> str:
+    """The installed distribution's version (from its metadata; 'unknown' when run from a tree never installed)."""
+    try:
+        return importlib.metadata.version("sharedctl")
+    except importlib.metadata.PackageNotFoundError:
+        return "unknown"
 
 
 def main(argv: list[str] | None = None) -> int:
     from .service_config import ServiceConfigError, expand
 
     argv = list(sys.argv[1:] if argv is None else argv)
-    parser = build_parser(argv[0] if argv else None)
+    try:
+        parser = build_parser(argv[0] if argv else None)
+    except IncompleteInstall as exc:
+        print(f"sharedctl: {exc}", file=sys.stderr)
+        return 3
     if argv and argv[0] in parser.unavailable:
         print(parser.unavailable[argv[0]], file=sys.stderr)
         return 2

@@ -8,17 +8,19 @@ from pathlib import Path
 from sharedctl.scenario import Scenario, ScenarioError, parse
 
 PACKAGED = tuple(sorted(entry.name.removesuffix(".toml")
-                        for entry in resources.files("sharedctl").joinpath("scenarios").iterdir()
+                        for entry in resources.files("sharedctl.scenarios").iterdir()
                         if entry.name.endswith(".toml")))
 
 
 def load(path_or_name: str) -> Scenario:
-    """A TOML path, or the name of a packaged scenario (e.g. `paper_convex`)."""
+    """A TOML path, or the name of a packaged scenario (`paper_convex` or `paper_convex.toml`); a file of that
+    name in the working directory wins."""
     path = Path(path_or_name)
+    name = path_or_name.removesuffix(".toml")          # a packaged one by its name or its file name
     if path.exists():
         data = path.read_bytes()
-    elif path_or_name in PACKAGED:
-        data = resources.files("sharedctl").joinpath(f"scenarios/{path_or_name}.toml").read_bytes()
+    elif name in PACKAGED:
+        data = resources.files("sharedctl.scenarios").joinpath(f"{name}.toml").read_bytes()
     else:
         raise ScenarioError(f"no scenario file {path_or_name!r} (packaged: {', '.join(PACKAGED)})")
     try:

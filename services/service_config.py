@@ -3,7 +3,10 @@
 A site keeps each process's options in a file (deploy/config/*.toml) instead of a long command
 line in a unit file. The file is a flat TOML table whose keys are the command's long options
 without the dashes; its values become those options, placed *before* the ones given on the
-command line, so an explicit option still wins (for a repeatable option, both are used):
+command line, so an explicit option wins: a file's setting of an option the command line gives
+again is left out (for a repeatable option, both are used), and so is one that belongs to a
+mutually exclusive group another of whose options the command line gives (`console
+--service-config console.toml --script X` drops the file's `scenario`):
 
     scenario = "paper_convex"          →  --scenario paper_convex
     can-option = ["port=7500"]         →  --can-option port=7500      (a list repeats the option)
@@ -41,13 +44,18 @@ def _scalar(value, path: Path, key: str) -> str:
 
 def options_from_file(path: Path, known: dict[str, argparse.Action]) -> list[str]:
     """The command-line options a settings file stands for (`known`: the command's option strings)."""
+    return [token for _, tokens in _settings(path, known) for token in tokens]
+
+
+def _settings(path: Path, known: dict[str, argparse.Action]) -> list[tuple[argparse.Action, list[str]]]:
+    """Each key of a settings file as (its option's action, the command-line tokens it stands for)."""
     try:
         table = tomllib.loads(path.read_text())
     except OSError as exc:
         raise ServiceConfigError(f"{path}: cannot read: {exc.strerror or exc}") from None
     except tomllib.TOMLDecodeError as exc:
         raise ServiceConfigError(f"{path}: not valid TOML: {exc}") from None
-    argv: list[str] = []
+    settings: list[tuple[argparse.Action, list[str]]] = []
     for key, value in table.items():
         option = f"--{key}"
         action = known.get(option)
@@ -59,13 +67,27 @@ def options_from_file(path: Path, known: dict[str, argparse.Action]) -> list[str
             if not isinstance(value, bool):
                 raise ServiceConfigError(f"{path}: {key}: expected true or false")
             negative = f"--no-{key}"                    # argparse.BooleanOptionalAction: false → --no-KEY
-            argv += [option] if value else ([negative] if negative in action.option_strings else [])
+            tokens = [option] if value else ([negative] if negative in action.option_strings else [])
         elif isinstance(value, list):
-            for item in value:
-                argv += [option, _scalar(item, path, key)]
+            tokens = [t for item in value for t in (option, _scalar(item, path, key))]
         else:
-            argv += [option, _scalar(value, path, key)]
-    return argv
+            tokens = [option, _scalar(value, path, key)]
+        settings.append((action, tokens))
+    return settings
+
+
+def _given(argv: list[str], known: dict[str, argparse.Action]) -> set[argparse.Action]:
+    """The actions whose options appear in `argv` (`--opt value` or `--opt=value`)."""
+    return {known[a.split("=", 1)[0]] for a in argv if a.startswith("--") and a.split("=", 1)[0] in known}
+
+
+def _overruled(action: argparse.Action, given: set[argparse.Action], sub: argparse.ArgumentParser) -> bool:
+    """A file's setting that the command line replaces: the same option, or another of its mutually exclusive
+    group (`--script` on the command line overrules the file's `scenario`, which may not be given with it)."""
+    if action in given and action.nargs != 0 and not isinstance(action, argparse._AppendAction):  # noqa: SLF001
+        return True
+    return any(action in group._group_actions and given & set(group._group_actions) - {action}   # noqa: SLF001
+               for group in sub._mutually_exclusive_groups)   # noqa: SLF001 — argparse keeps them private
 
 
 def expand(argv: list[str], parser: argparse.ArgumentParser) -> list[str]:
@@ -91,9 +113,10 @@ def expand(argv: list[str], parser: argparse.ArgumentParser) -> list[str]:
         else:
             remaining.append(arg)
         i += 1
-    from_files: list[str] = []
-    for name in files:
-        from_files += options_from_file(Path(name), sub._option_string_actions)   # noqa: SLF001 — argparse's option table
+    known = sub._option_string_actions   # noqa: SLF001 — argparse's option table
+    given = _given(remaining, known)
+    from_files = [token for name in files for action, tokens in _settings(Path(name), known)
+                  if not _overruled(action, given, sub) for token in tokens]
     return [command, *from_files, *remaining]
 
 

@@ -75,7 +75,27 @@ def test_help_still_lists_every_command_when_the_extras_are_missing(without, cap
     assert ["plot", "(needs pip install 'sharedctl[plots]')"] in rows
 
 
-def test_a_missing_runtime_module_is_not_mistaken_for_an_extra(without):
+def test_a_missing_runtime_module_is_not_mistaken_for_an_extra(without, capsys):
     without("rich")
-    with pytest.raises(ModuleNotFoundError):
-        cli.main(["fuzz", "--count", "1"])
+    assert cli.main(["fuzz", "--count", "1"]) == 3
+    err = capsys.readouterr().err
+    assert "cannot import 'rich" in err and "sharedctl fuzz" in err and "runtime dependencies" in err, err
+
+
+def test_a_missing_module_of_this_project_is_a_loud_error_not_a_shorter_command_list(monkeypatch, capsys):
+    """Before, a packaging mistake that left a subpackage out showed as "invalid choice: 'router' (choose from )"."""
+    for key in [k for k in sys.modules if k.startswith("sharedctl.services.security")]:
+        monkeypatch.delitem(sys.modules, key)
+    monkeypatch.setitem(sys.modules, "sharedctl.services.security", None)
+    for argv in (["router", "--help"], ["--help"]):
+        assert cli.main(argv) == 3
+        err = capsys.readouterr().err
+        assert "cannot import 'sharedctl.services.security" in err and "sharedctl router" in err, err
+
+
+def test_the_version_is_the_installed_distributions(capsys):
+    from importlib.metadata import version
+
+    with pytest.raises(SystemExit) as stop:
+        cli.main(["--version"])
+    assert stop.value.code == 0 and capsys.readouterr().out == f"sharedctl {version('sharedctl')}\n"

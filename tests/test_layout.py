@@ -73,9 +73,19 @@ def test_the_resolver_sees_a_relative_import_of_a_study(tmp_path, monkeypatch):
                                                                          STUDIES + ".bench.stack_run"]}
 
 
+ENTRY_POINT = ROOT / "sharedctl" / "__main__.py"    # `python -m sharedctl`: runs the command line, imported by nothing
+
+
 @pytest.mark.parametrize("folder", ["sharedctl", "protocol"])
 def test_the_core_and_the_protocol_import_no_service(folder):
-    assert offenders(sources(folder), ("sharedctl.services",)) == {}
+    assert offenders([p for p in sources(folder) if p != ENTRY_POINT], ("sharedctl.services",)) == {}
+
+
+def test_the_entry_point_imports_only_the_command_line_and_nothing_imports_it():
+    assert offenders([ENTRY_POINT], ("sharedctl.services",)) == {"sharedctl/__main__.py": ["sharedctl.services.cli",
+                                                                                           "sharedctl.services.cli.main"]}
+    everything = [p for folder in FOLDERS for p in sources(folder)]
+    assert offenders(everything, ("sharedctl.__main__",)) == {}
 
 
 def test_the_control_core_imports_neither_zenoh_nor_python_can():

@@ -209,7 +209,7 @@ def run(args) -> int:
         daemon.realtime = config.realtime and make_loop_realtime()   # this thread runs the loop
         if args.cpu is not None and not pin_to_cpu(args.cpu):
             priority += f" (not pinned to CPU {args.cpu})"
-        zenoh_desc = " ".join([f"listen {e}" for e in listen] + [f"connect {e}" for e in connect])
+        zenoh_desc = zenoh_config.describe(args.zenoh_config, listen, connect)
         print(
             f"{PROG}: robot {robot_id}, scenario {scenario.name}, controller {loop.controller.name}, "
             f"{config.rate:g} Hz (telemetry {config.telemetry_rate:g} Hz), torque limit {config.torque_limit:g} N·m, "

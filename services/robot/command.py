@@ -123,7 +123,7 @@ def run(args) -> int:
         process.drive_restart = (int(axis), down)
         signal.signal(signal.SIGUSR2, lambda *_: process.request_drive_restart())
         c = sim.config
-        endpoint = f"listen {listen[0]}" if listen else f"connect {connect[0]}" if connect else args.zenoh_config
+        endpoint = zenoh_config.describe(args.zenoh_config, listen, connect)
         print(f"{PROG}: {robot_id} on CAN {spec.describe()}, Zenoh {endpoint}; physics {c.physics_rate_hz:g} Hz, "
               f"encoder {c.encoder_rate_hz:g} Hz, heartbeat {c.heartbeat_rate_hz:g} Hz, truth {c.truth_rate_hz:g} Hz, "
               f"watchdog {c.watchdog_timeout:g} s{pinned}", flush=True)

@@ -48,7 +48,6 @@ from __future__ import annotations
 import os
 import shutil
 import subprocess
-import sys
 import tempfile
 import time
 from dataclasses import dataclass, field
@@ -56,7 +55,7 @@ from pathlib import Path
 
 from sharedctl.protocol import keys
 
-from ..children import Child
+from ..children import Child, python_module
 from .credentials import Credentials, generate
 from .signing import Signer
 from .roles import ROLES
@@ -77,7 +76,7 @@ def _start_router(argv: list[str], log_dir: Path, name: str = "router") -> Child
     up seconds sooner on a busy host), in its own session, output to log_dir/NAME.log."""
     log = log_dir / f"{name}.log"
     with open(log, "wb") as out:
-        popen = subprocess.Popen([sys.executable, "-m", "sharedctl.services.security.router_command", *argv],
+        popen = subprocess.Popen([*python_module("sharedctl.services.security.router_command"), *argv],
                                  env=dict(os.environ, PYTHONUNBUFFERED="1"), stdin=subprocess.DEVNULL, stdout=out,
                                  stderr=subprocess.STDOUT, start_new_session=True)
     return Child("router", popen, log)

@@ -204,6 +204,15 @@ def check_session_args(config_file: str | None, listen: list[str] | None, connec
         config(listen, connect)
 
 
+def describe(config_file: str | None, listen: list[str] | None, connect: list[str] | None) -> str:
+    """How a service's session reaches the others, for its start line: its endpoints and/or its configuration
+    file (whose own endpoints apply where none are given)."""
+    parts = [f"listen {e}" for e in listen or []] + [f"connect {e}" for e in connect or []]
+    if config_file:
+        parts.append(f"config {config_file}")
+    return " ".join(parts) or "default endpoints"
+
+
 def open_configured(config_file: str | None, listen: list[str] | None, connect: list[str] | None) -> zenoh.Session:
     """The session a service opens: from `config_file` when given, else the plain loopback peer."""
     if config_file:

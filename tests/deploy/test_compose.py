@@ -1,4 +1,5 @@
 """deploy/docker-compose.yml, parsed and checked against docs/deploy.md and the repository (no Docker engine here)."""
+import tomllib
 from pathlib import Path, PurePosixPath
 
 import pytest
@@ -71,13 +72,25 @@ def test_each_command_reads_a_settings_file_from_the_repository_and_parses(name)
     assert args.command == name
 
 
-@pytest.mark.parametrize("name,role", [("robot", "robot"), ("controller", "controller"), ("console", "operator")])
-def test_each_service_sees_exactly_its_roles_zenoh_credentials(name, role):
+@pytest.mark.parametrize("name,role,identity", [("robot", "robot", set()),
+                                                ("controller", "controller", {"operators.toml"}),
+                                                ("console", "operator", {"operator.signing-key.pem"})])
+def test_each_service_sees_exactly_its_roles_credentials_and_every_file_its_settings_name(name, role, identity):
     service = compose()["services"][name]
     args = parse_command([name, "--service-config", str(DEPLOY / "config" / f"{name}.toml")])
     assert args.zenoh_config == f"/etc/sharedctl/credentials/{role}.json5"
     secrets = {PurePosixPath(p).name for p in mounts(service) if p.startswith("/etc/sharedctl/credentials/")}
-    assert secrets == {f"{role}.json5", f"{role}.pem", f"{role}-key.pem", "ca.pem"}
+    assert secrets == {f"{role}.json5", f"{role}.pem", f"{role}-key.pem", "ca.pem"} | identity
+    named = [getattr(args, option, None) for option in ("zenoh_config", "operators", "signing_key")]
+    assert {PurePosixPath(p).name for p in named if p} <= secrets       # what the settings name is there
+
+
+def test_every_service_runs_as_the_owner_of_the_credentials():
+    """make-credentials.sh writes keys and passwords mode 0600 and docs/deploy.md gives them to uid 990; with
+    cap_drop ALL a root process could not read them (no CAP_DAC_OVERRIDE)."""
+    assert "chown -R sharedctl:sharedctl /etc/sharedctl/credentials" in DOC.read_text()
+    for name, service in compose()["services"].items():
+        assert service.get("user") == "990:990", name
 
 
 def test_every_service_stays_in_the_hosts_network_namespace_and_maps_no_port():
@@ -142,11 +155,14 @@ def test_the_documented_compose_commands_use_this_file():
     assert "docker compose -f deploy/docker-compose.yml up -d --build" in doc
 
 
-def test_the_dockerfile_copies_only_what_exists():
+def test_the_dockerfile_copies_only_what_exists_and_everything_the_build_reads():
     lines = (DEPLOY / "Dockerfile").read_text().splitlines()
-    sources = [line.split()[1] for line in lines if line.startswith("COPY ")]
+    sources = [s for line in lines if line.startswith("COPY ") for s in line.split()[1:-1]]
     assert sources and all((ROOT / s).exists() for s in sources), sources
     assert any(line.startswith("USER ") and "root" not in line for line in lines)
+    project = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]
+    needed = {"pyproject.toml", project["readme"], *project["license-files"], "sharedctl", "protocol", "services"}
+    assert needed <= {s.split("/")[0] for s in sources}, needed - set(sources)
 
 
 def test_the_image_installs_only_the_runtime_lock_checking_its_hashes():

@@ -217,7 +217,7 @@ def ask(lease, guard, rejections, query, now, trust):
 def test_the_lease_is_bound_to_the_verified_operator(signers, trust):
     lease, guard, rejections = OperatorLease(mode="explicit"), ReplayGuard(), Counter()
     unsigned = ask(lease, guard, rejections, lease_query(None, "alice", 1, LeaseAction.TAKE), 1.0, trust)
-    assert not unsigned.granted and unsigned.request_seq == 1 and "unsigned" in unsigned.reason   # the console learns why
+    assert not unsigned.granted and unsigned.request_seq == 1 and "unsigned" in unsigned.reason   # says why
     assert ask(lease, guard, rejections, lease_query(signers["alice"], "alice", 2, LeaseAction.TAKE), 1.1,
                trust).granted
     # bob, with alice's names, releases; then takes as alice: both refused, alice keeps control

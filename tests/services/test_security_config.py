@@ -241,3 +241,15 @@ def test_the_deploy_router_acl_is_the_one_the_code_builds():
     assert normal(acl["subjects"], subject_fields) == normal(expected["subjects"], subject_fields)
     policy_fields = ("id", "rules", "subjects")
     assert normal(acl["policies"], policy_fields) == normal(expected["policies"], policy_fields)
+
+
+@pytest.mark.parametrize("config,listen,connect,expected", [
+    ("/etc/c.json5", [], [], "config /etc/c.json5"),
+    (None, ["tcp/127.0.0.1:1"], [], "listen tcp/127.0.0.1:1"),
+    ("/etc/c.json5", [], ["tls/127.0.0.1:7447"], "connect tls/127.0.0.1:7447 config /etc/c.json5"),
+])
+def test_a_start_line_says_how_the_session_connects_whatever_was_given(config, listen, connect, expected):
+    """Before, a controller given only --zenoh-config printed "Zenoh ," in its start line."""
+    from sharedctl.services.security.zenoh_config import describe
+
+    assert describe(config, listen, connect) == expected

@@ -36,7 +36,6 @@ from __future__ import annotations
 import gc
 import os
 import struct
-import sys
 import tempfile
 import threading
 import time
@@ -340,7 +339,7 @@ def _start_probe(name: str, argv: list[str], log_dir: Path) -> children.Child:
 
     log = log_dir / f"{name}.log"
     with open(log, "wb") as out:
-        popen = subprocess.Popen([sys.executable, "-m", "sharedctl.services.studies.bench.hop_probe", *argv],
+        popen = subprocess.Popen([*children.python_module("sharedctl.services.studies.bench.hop_probe"), *argv],
                                  stdin=subprocess.DEVNULL, stdout=out, stderr=subprocess.STDOUT, start_new_session=True)
     return children.Child(name, popen, log)
 

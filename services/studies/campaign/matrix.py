@@ -27,10 +27,11 @@ import json
 import os
 import signal
 import subprocess
-import sys
 import time
 from dataclasses import dataclass
 from pathlib import Path
+
+from sharedctl.services.children import python_module
 
 from .judge import CONTROL_PERIOD, ESTOP_HOLDS, FEEDBACK_TIMEOUT, WATCHDOG, WATCHDOG_HOLDS, RunResult, judge
 
@@ -268,7 +269,7 @@ def validate(cases: list[Case], parse) -> dict[str, str]:
 
 # ----- running -----------------------------------------------------------------------------
 def demo_argv(case: Case, json_out: Path, log_dir: Path | None = None) -> list[str]:
-    argv = [sys.executable, "-m", "sharedctl.services.cli", "demo", "--scenario", case.scenario,
+    argv = [*python_module("sharedctl.services.cli"), "demo", "--scenario", case.scenario,
             "--duration", f"{case.duration:g}", "--headless", "--no-reference", "--json", str(json_out)]
     if case.secure:
         argv.append("--secure")
