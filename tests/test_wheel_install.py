@@ -24,8 +24,9 @@ pytestmark = [pytest.mark.processes, pytest.mark.slow]
 ROOT = Path(__file__).resolve().parents[1]
 
 
-def _tracked_tree(dest: Path) -> Path:
-    """A copy of the repository's tracked files (what a fresh clone holds), so the build leaves nothing behind."""
+def _tracked_tree(dest: Path) -> list[str]:
+    """Copy the repository's tracked files (what a fresh clone holds) to `dest`, so the build leaves nothing
+    behind; returns their names."""
     if (ROOT / ".git").exists() and shutil.which("git"):
         files = subprocess.run(["git", "-C", str(ROOT), "ls-files", "-co", "--exclude-standard"], check=True,
                                capture_output=True, text=True).stdout.splitlines()
@@ -36,13 +37,14 @@ def _tracked_tree(dest: Path) -> Path:
         if src.is_file():
             (dest / name).parent.mkdir(parents=True, exist_ok=True)
             shutil.copy2(src, dest / name)
-    return dest
+    return [name for name in files if (dest / name).is_file()]
 
 
 @pytest.fixture(scope="module")
 def installed(tmp_path_factory):
     tmp = tmp_path_factory.mktemp("wheel")
-    tree = _tracked_tree(tmp / "src")
+    tree = tmp / "src"
+    files = _tracked_tree(tree)
     env = {k: v for k, v in os.environ.items() if k != "PYTHONDONTWRITEBYTECODE"}   # its notices are not the build's
     build = subprocess.run([sys.executable, "-m", "pip", "wheel", "--no-deps", "--no-build-isolation", "--no-index",
                             "-w", str(tmp / "dist"), str(tree)], capture_output=True, text=True, env=env, timeout=300)
@@ -57,7 +59,7 @@ def installed(tmp_path_factory):
     install = subprocess.run([sys.executable, "-m", "pip", "--python", str(python), "install", "--no-deps",
                               "--no-index", str(wheel)], capture_output=True, text=True, timeout=300)
     assert install.returncode == 0, install.stderr[-2000:]
-    return {"build": build, "wheel": wheel, "venv": venv, "python": python, "tmp": tmp}
+    return {"build": build, "wheel": wheel, "venv": venv, "python": python, "tmp": tmp, "files": set(files)}
 
 
 def _run(installed, argv, cwd, timeout=120):
@@ -79,6 +81,24 @@ def test_the_wheel_holds_the_scenarios_the_dbc_the_license_and_the_entry_point(i
             "sharedctl/__main__.py"} <= names
     assert any(n.endswith(".dist-info/licenses/LICENSE") for n in names)
     assert not any(n.startswith("tests/") for n in names)
+
+
+def test_the_sdist_is_the_tracked_tree_so_its_tests_can_run(installed, tmp_path):
+    """Before, the sdist held 19 of the 94 files under tests/ (and none of deploy/ or docs/ they read)."""
+    import tarfile
+
+    tree = installed["tmp"] / "src"
+    env = {k: v for k, v in os.environ.items() if k != "PYTHONDONTWRITEBYTECODE"}
+    script = f"import setuptools.build_meta as b; print(b.build_sdist({str(tmp_path)!r}))"
+    built = subprocess.run([sys.executable, "-c", script], cwd=tree, capture_output=True, text=True, env=env,
+                           timeout=300)
+    assert built.returncode == 0, built.stderr[-2000:]
+    assert "warning" not in (built.stdout + built.stderr).lower()
+    with tarfile.open(tmp_path / built.stdout.split()[-1]) as sdist:
+        members = {m.name.split("/", 1)[1] for m in sdist.getmembers() if m.isfile() and "/" in m.name}
+    tracked = installed["files"]
+    assert tracked - members == set()
+    assert {m for m in members - tracked if not m.startswith("sharedctl.egg-info/")} <= {"PKG-INFO", "setup.cfg"}
 
 
 def test_the_installed_package_is_the_wheels_not_the_source_tree(installed):
