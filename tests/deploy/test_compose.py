@@ -173,3 +173,16 @@ def test_the_image_installs_only_the_runtime_lock_checking_its_hashes():
     assert not any("test.lock" in line or "requirements.lock" in line for line in lines)
     runtime = (ROOT / "requirements" / "runtime.lock").read_text()
     assert "\npytest==" not in runtime and "\nmatplotlib==" not in runtime
+
+
+def test_every_credential_file_a_service_mounts_is_one_make_credentials_writes(tmp_path):
+    from sharedctl.services.security.credentials import generate
+    from sharedctl.services.security.credentials_command import write_site_configs
+
+    site = generate(tmp_path / "credentials")
+    write_site_configs(site, "tls/127.0.0.1:7447")
+    written = {p.name for p in site.directory.iterdir()}
+    for name, service in compose()["services"].items():
+        for host in mounts(service).values():
+            if host.startswith("/etc/sharedctl/credentials/"):
+                assert PurePosixPath(host).name in written, (name, host)
