@@ -83,6 +83,15 @@ class Injection:
                 "continued_at": self.continued_at, "skipped": self.skipped}
 
 
+def _wait_ready(child, ready: Path, failure: str) -> None:
+    """Until `child` has written its `ready` file; RuntimeError(`failure`) if it exits or READY_TIMEOUT passes."""
+    deadline = time.monotonic() + READY_TIMEOUT
+    while not ready.exists():
+        if child.popen.poll() is not None or time.monotonic() > deadline:
+            raise RuntimeError(failure)
+        time.sleep(0.05)
+
+
 @dataclass
 class FaultStack:
     plan: FaultPlan
@@ -163,11 +172,7 @@ class FaultStack:
             # in the torque loop's path: the controller's priority (nice −10, SCHED_FIFO) when allowed; at
             # normal priority on an overloaded host frames were measured waiting ~200 ms in its buffer
             self.gateway_priority = raise_priority(self.infra["gateway"].popen.pid)
-            deadline = time.monotonic() + READY_TIMEOUT
-            while not ready.exists():
-                if self.infra["gateway"].popen.poll() is not None or time.monotonic() > deadline:
-                    raise RuntimeError("the CAN fault gateway did not come up")
-                time.sleep(0.05)
+            _wait_ready(self.infra["gateway"], ready, "the CAN fault gateway did not come up")
         if self.relay_endpoint is not None:
             stats = log_dir / "fault-relay.json"
             self.stats_files["relay"] = stats
@@ -177,12 +182,8 @@ class FaultStack:
             self.infra["relay"] = start_child("fault-relay", [
                 "fault-relay", *zenoh_args, "--robot-id", robot_id, *self.fault_argv(), "--stats", str(stats),
                 "--ready", str(ready), "--duration", backstop], log_dir)
-            deadline = time.monotonic() + READY_TIMEOUT
-            while not ready.exists():
-                if self.infra["relay"].popen.poll() is not None or time.monotonic() > deadline:
-                    raise RuntimeError("the Zenoh fault relay did not come up"
-                                       + ("" if relay_zenoh else f" on {self.relay_endpoint}"))
-                time.sleep(0.05)
+            _wait_ready(self.infra["relay"], ready, "the Zenoh fault relay did not come up"
+                        + ("" if relay_zenoh else f" on {self.relay_endpoint}"))
 
     # ----- during the run ------------------------------------------------------
     def robot_arguments(self) -> list[str]:
