@@ -5,7 +5,9 @@ the demo is exactly the unimpaired one.
 
 * ``operator.*``/``telemetry.*`` faults: a `sharedctl fault-relay` child listens on its own
   loopback port F and connects to the controller's endpoint C; the console connects to F
-  instead of C. The demo's own measuring session still connects to C and R directly.
+  instead of C. The demo's own measuring session still connects to C and R directly. Behind
+  ``--secure`` the relay listens nowhere: it is a client of the console's own router and of
+  the site router (security/secure_stack.py, `relay_args`), and says it is up in a ready file.
 * ``can.*`` faults: the controller and the robot get two different host-local udp_multicast
   ports and a `sharedctl fault-gateway` child forwards between them.
 * process faults (``controller|console|robot.kill_at`` / ``stop_at``, ``controller.restart_at``)
