@@ -57,7 +57,7 @@ class StepKernel:
     def step(self, fleet, k: int, steps: int, recording):
         """Advance `fleet` by one step; returns (stopping columns, their Trace.finite) or None."""
         e = self.e
-        L, dt, table = e.layout, e.dt, e.table
+        L, dt = e.layout, e.dt
         Y, ops = fleet.Y, fleet.operators
         N = fleet.size
         t = k * dt
@@ -70,40 +70,9 @@ class StepKernel:
             u_h0, intent = np.zeros_like(q), np.zeros(N)
         else:
             u_h0, intent = ops.command(wish, q, v)
-        row_ref, ref_ok, wish_ok = self.reference(wish)
-        groups = all_groups(table, q, v_meas, row_ref, e.lam)
-        seen = self.seen_rows(fleet, groups.rows.x, v_meas, u_h0, self.observed())
-        situation = classify(table, groups.rows, e.sharing.bands, seen)
-        missed = missed_rows(table, situation)
-        chosen = select_group(table, situation, groups.value, missed, ref_ok)
-        push_away = push_turned_away(table, seen, u_h0, wish_ok, situation.containing, e.sharing.bands)
-        fleet.arbiter, dec = arbitrate(table, e.sharing, fleet.arbiter, situation, seen, missed, chosen,
-                                       intent, dt, push_away)
-
-        # --- law (re)initialisation, as in simulator.simulate --------------------------------
+        groups, situation, chosen, dec = self.decide(fleet, q, v_meas, wish, u_h0, intent, dt)
         engaged = (dec.authority != HUMAN) & (dec.group >= 0)
-        law_changed = (fleet.law_role < 0) | (e.law_of_role[dec.role] != e.law_of_role[np.maximum(fleet.law_role, 0)])
-        reinit = engaged & (~fleet.engaged_before | dec.group_changed | law_changed)
-        release = ~engaged & fleet.engaged_before & fleet.has_state
-        carry = (reinit | release) & fleet.has_state
-        if carry.any():
-            for index, law in enumerate(e.distinct):
-                cols = np.flatnonzero(carry & e.runs(index, fleet.law_role))
-                if cols.size:
-                    theta_hat[:, cols] = law.estimate(theta_hat[:, cols], law_state[: law.state_size, cols])
-        if reinit.any():
-            cols = np.flatnonzero(reinit)
-            roles = dec.role[cols]
-            for index, law in enumerate(e.distinct):
-                sub = cols[e.runs(index, roles)]
-                if sub.size and law.state_size:
-                    g = dec.group[sub]
-                    z = groups.rows.z[table.group_rows[g], sub[:, None]].T
-                    law_state[: law.state_size, sub] = law.initial_state(z, groups.p[g, :, sub].T)
-            fleet.law_role[cols] = roles
-            fleet.has_state[cols] = e.state_size[roles] > 0
-        fleet.has_state &= ~release
-        fleet.engaged_before = engaged
+        self.engage(fleet, dec, engaged, groups, theta_hat, law_state)
 
         # --- RK4 -----------------------------------------------------------------------------
         plan = self.plan(engaged, dec, wishes)
@@ -164,6 +133,50 @@ class StepKernel:
         stop = np.flatnonzero(~going)
         return stop, finite[stop] | escaped[stop]
 
+    def decide(self, fleet, q, v_meas, wish, u_h0, intent, dt):
+        """The sharing function sampled at (q, v_meas): (AllGroups, Situation, chosen group, Decisions);
+        fleet.arbiter moves on by dt."""
+        e = self.e
+        table = e.table
+        row_ref, ref_ok, wish_ok = self.reference(wish)
+        groups = all_groups(table, q, v_meas, row_ref, e.lam)
+        seen = self.seen_rows(fleet, groups.rows.x, v_meas, u_h0, self.observed())
+        situation = classify(table, groups.rows, e.sharing.bands, seen)
+        missed = missed_rows(table, situation)
+        chosen = select_group(table, situation, groups.value, missed, ref_ok)
+        push_away = push_turned_away(table, seen, u_h0, wish_ok, situation.containing, e.sharing.bands)
+        fleet.arbiter, dec = arbitrate(table, e.sharing, fleet.arbiter, situation, seen, missed, chosen,
+                                       intent, dt, push_away)
+        return groups, situation, chosen, dec
+
+    def engage(self, fleet, dec, engaged, groups, theta_hat, law_state) -> None:
+        """Law (re)initialisation, as in simulator.simulate: on a take-over, group or law change the
+        incoming law's filters restart from their published initial conditions and θ̂ carries over
+        (θ̂ + β when leaving (13)); a release hands the estimate back to θ̂. In place on the fleet."""
+        e, table = self.e, self.e.table
+        law_changed = (fleet.law_role < 0) | (e.law_of_role[dec.role] != e.law_of_role[np.maximum(fleet.law_role, 0)])
+        reinit = engaged & (~fleet.engaged_before | dec.group_changed | law_changed)
+        release = ~engaged & fleet.engaged_before & fleet.has_state
+        carry = (reinit | release) & fleet.has_state
+        if carry.any():
+            for index, law in enumerate(e.distinct):
+                cols = np.flatnonzero(carry & e.runs(index, fleet.law_role))
+                if cols.size:
+                    theta_hat[:, cols] = law.estimate(theta_hat[:, cols], law_state[: law.state_size, cols])
+        if reinit.any():
+            cols = np.flatnonzero(reinit)
+            roles = dec.role[cols]
+            for index, law in enumerate(e.distinct):
+                sub = cols[e.runs(index, roles)]
+                if sub.size and law.state_size:
+                    g = dec.group[sub]
+                    z = groups.rows.z[table.group_rows[g], sub[:, None]].T
+                    law_state[: law.state_size, sub] = law.initial_state(z, groups.p[g, :, sub].T)
+            fleet.law_role[cols] = roles
+            fleet.has_state[cols] = e.state_size[roles] > 0
+        fleet.has_state &= ~release
+        fleet.engaged_before = engaged
+
     # ------------------------------------------------------------------------------
     def plan(self, engaged, dec, wishes):
         """Per distinct law: its robots (None for every robot of the chunk), their group frames
@@ -192,9 +205,10 @@ class StepKernel:
             entries.append((law, cols, sel, frame, refs))
         return entries
 
-    def rates(self, fleet, Y, wish, plan, stage_time, dec, machine, escaped, u_h=None, record=False):
+    def rates(self, fleet, Y, wish, plan, stage_time, dec, machine, escaped, u_h=None, record=False, u_extra=None):
         """The closed loop's rate at one RK stage (simulator.simulate's `rates`); with `record`,
-        also u_h, u_f and u_s."""
+        also u_h, u_f and u_s. `u_extra` (n, N), if given, is added to u_s before the governor (the
+        sampled controller's recovery force, sampled.py)."""
         e = self.e
         L, n = e.layout, e.n
         q, v, theta_hat, law_state = Y[L.q], Y[L.v], Y[L.theta], Y[L.law_state]
@@ -231,6 +245,8 @@ class StepKernel:
                 scatter(out[L.theta], sel, theta_dot)
             elif mach.any():
                 scatter(out[L.theta], sel, np.where(mach, theta_dot, 0.0))
+        if u_extra is not None:
+            u_s += u_extra
         if e.backup is not None:
             self.govern(fleet, q, v_meas, u_s, dec, out[L.theta], record)
         for law, _, sel, _, _ in plan:

@@ -146,6 +146,29 @@ class WheelMap:
             cos = sin = _NAN
         return cos * fx - sin * fy, sin * fx + cos * fy, self.l_r * (t0 + t1 + t2)
 
+    # ----- the same arithmetic over a batch: psi (N,), vectors (3, N) → (3, N) ------------------------
+    def wheel_torques_batch(self, psi: np.ndarray, u: np.ndarray) -> np.ndarray:
+        """τ = B(ψ)⁻¹ u for every column (`wheel_torques`, elementwise)."""
+        cos, sin = np.cos(psi), np.sin(psi)
+        fx, fy = cos * u[0] + sin * u[1], cos * u[1] - sin * u[0]
+        x, y, z = self.k_x * fx, self.k_y * fy, self.k_m * u[2]
+        return np.stack((z - x + y, z - x - y, 2.0 * x + self.k_s * u[2]))
+
+    def wheel_speeds_batch(self, psi: np.ndarray, v: np.ndarray) -> np.ndarray:
+        """ω = B(ψ)ᵀ q̇ for every column (`wheel_speeds`, elementwise)."""
+        cos, sin = np.cos(psi), np.sin(psi)
+        bx, by = cos * v[0] + sin * v[1], cos * v[1] - sin * v[0]
+        x, y, z = self.s_r * bx, self.c_r * by, self.l_r * v[2]
+        return np.stack((z - x + y, z - x - y, self.one_r * bx + z))
+
+    def generalised_force_batch(self, psi: np.ndarray, tau: np.ndarray) -> np.ndarray:
+        """u = B(ψ) τ for every column (`generalised_force`, elementwise)."""
+        t0, t1, t2 = tau
+        fx = self.one_r * t2 - self.s_r * (t0 + t1)
+        fy = self.c_r * (t0 - t1)
+        cos, sin = np.cos(psi), np.sin(psi)
+        return np.stack((cos * fx - sin * fy, sin * fx + cos * fy, self.l_r * (t0 + t1 + t2)))
+
 
 @dataclass(frozen=True)
 class OmniRobot(EulerLagrangeModel):

@@ -1,0 +1,126 @@
+"""The Monte-Carlo's batched fault loop (services/studies/montecarlo/loop.py) is the scalar one.
+
+The oracle is the sampled fault loop of tests/test_fault_envelope_properties.py (`FaultLoop`): the
+scalar `SharedController.step` on the scalar `Plant`, through the same model of the CAN link,
+drives and watchdogs, written robot by robot. A batch whose robots carry different faults (CAN
+delays feedback- and command-ward, a hang, a kill) must follow each robot's scalar run to
+rounding, for every configuration; the batched plant must be `Plant.step`; and the loop must see
+what a missing brake does (a planted unsafe configuration).
+"""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from sharedctl.batched import BatchProblem
+from sharedctl.models import OmniRobot
+from sharedctl.models.omni_robot import OmniRobotParameters
+from sharedctl.services.robot.plant import Plant, RobotSimConfig
+from sharedctl.services.scenario_files import load
+from sharedctl.services.studies.montecarlo.loop import NEVER, FaultyLoop, LoopFaults
+from sharedctl.services.studies.montecarlo.plant import PlantBatch
+
+from .test_fault_envelope_properties import Envelope, FaultLoop
+
+PERIODS = 1000                              # 2 s of the adversarial approach to the wall
+
+
+class _Case:
+    """The packaged adversarial scenario as FaultLoop takes a case."""
+
+    label, notes = "adversarial_wall", ""
+
+    def __init__(self):
+        self.scenario = load("adversarial_wall")
+        loop, self.q0, self.v0 = self.scenario.closed_loop()
+        self.regions = [(r.K, r.T) for r in loop.feasible.regions]
+
+    def loop(self, law):
+        return self.scenario.closed_loop(law)[0]
+
+
+#: per robot: (feedback periods, transit periods, kill period, hang start, hang periods)
+ROBOTS = [(0, 0, NEVER, NEVER, 0), (3, 2, NEVER, 500, 30), (8, 5, 600, NEVER, 0), (13, 12, NEVER, 550, 50)]
+
+
+@pytest.mark.parametrize("law", ["ce", "nce", "of"])
+def test_each_robot_of_a_batch_follows_its_scalar_fault_loop_to_rounding(law):
+    case = _Case()
+    robots = [(0, 0) + r[2:] for r in ROBOTS] if law == "of" else ROBOTS   # OF: no loop delay (a stated limit)
+    expected = []
+    for f, c, kill, hang_at, hang_len in robots:
+        scalar = FaultLoop(case, law, Envelope(f, c, 0.0, 0), case.loop(law).human, "adversary")
+        for k in range(PERIODS):
+            scalar.period(k < kill and not hang_at <= k < hang_at + hang_len)
+        expected.append(scalar)
+    N = len(robots)
+    loop = case.loop(law)
+    faults = LoopFaults.none(N).replace(feedback=[r[0] for r in robots], transit=[r[1] for r in robots],
+                                        kill_at=[r[2] for r in robots], hang_at=[r[3] for r in robots],
+                                        hang_periods=[r[4] for r in robots])
+    batch = FaultyLoop(BatchProblem.replicate(loop, np.tile(case.q0, (N, 1)), np.tile(case.v0, (N, 1))),
+                       case.regions, faults, output_feedback=law == "of").run(PERIODS).result()
+    for i, scalar in enumerate(expected):
+        assert batch.min_margin[i] == pytest.approx(scalar.min_margin, abs=1e-9), f"robot {i}"
+        np.testing.assert_allclose(batch.q[:, i], scalar.ps.q, atol=1e-9, err_msg=f"robot {i}")
+        np.testing.assert_allclose(batch.v[:, i], scalar.ps.qd, atol=1e-8, err_msg=f"robot {i}")
+        assert bool(batch.estopped[i]) == scalar.estopped, f"robot {i}"
+    assert batch.estopped.tolist() == [False, False, False, True], "the 50-period hang trips the watchdogs"
+
+
+def test_the_batched_plant_is_the_robots_plant_to_rounding():
+    rng = np.random.default_rng(7)
+    config = RobotSimConfig()
+    N = 64
+    robots = [OmniRobot(OmniRobotParameters(mass=m, body_inertia=i))          # each its own payload
+              for m, i in zip(rng.uniform(5.0, 28.0, N), rng.uniform(0.3, 0.8, N))]
+    theta = np.stack([r.theta for r in robots], axis=1)
+    q, v = rng.uniform(-2, 2, (3, N)), rng.uniform(-1.5, 1.5, (3, N))
+    v[:, :4] *= 40.0                                          # some wheels beyond the speed limit
+    tau = rng.uniform(-80, 80, (3, N))                       # beyond the torque limit too
+    disarmed = rng.random((3, N)) < 0.3
+    q1, v1 = PlantBatch(robots[0], theta, config).step(q, v, tau, disarmed, 1e-3)
+    for i, robot in enumerate(robots):
+        plant = Plant(robot, config)
+        state = plant.step(plant.initial_state(q[:, i], v[:, i]), tuple(tau[:, i]), 1e-3,
+                           plant.brake_torques(disarmed[:, i]))
+        np.testing.assert_allclose(q1[:, i], state.q, rtol=1e-13, atol=1e-13)
+        np.testing.assert_allclose(v1[:, i], state.qd, rtol=1e-13, atol=1e-12)
+
+
+def test_the_wheel_maps_batch_forms_are_its_scalar_forms():
+    wm = OmniRobot().wheel_map
+    rng = np.random.default_rng(3)
+    psi, x = rng.uniform(-4, 4, 20), rng.normal(size=(3, 20))
+    for batch, scalar in ((wm.wheel_torques_batch, wm.wheel_torques), (wm.wheel_speeds_batch, wm.wheel_speeds),
+                          (wm.generalised_force_batch, wm.generalised_force)):
+        got = batch(psi, x)
+        for i in range(20):
+            np.testing.assert_allclose(got[:, i], scalar((0.0, 0.0, psi[i]), tuple(x[:, i])), atol=1e-12)
+
+
+def _killed_at_speed(brake_torque: float):
+    case = _Case()
+    loop = case.loop("ce")
+    N = 3
+    faults = LoopFaults.none(N).replace(kill_at=[1000, 1100, 1200])      # on the approach to the wall
+    run = FaultyLoop(BatchProblem.replicate(loop, np.tile(case.q0, (N, 1)), np.tile(case.v0, (N, 1))),
+                     case.regions, faults, brake_torque=brake_torque)
+    return run.run(1300).run_to_rest(6.0).result()
+
+
+def test_a_kill_on_the_approach_stops_inside_with_the_brakes_and_leaves_the_set_without_them():
+    braked, unbraked = _killed_at_speed(RobotSimConfig().brake_torque), _killed_at_speed(0.0)
+    assert np.all(braked.min_margin > 0.0), braked.min_margin
+    assert np.all(braked.final_speed < 1e-2)
+    assert np.any(unbraked.min_margin < 0.0), unbraked.min_margin
+    assert np.all(braked.approach_speed_at_fault > 0.3), "the kills land while the robot closes on the wall"
+
+
+def test_every_torque_frame_lost_trips_the_watchdogs_and_the_controller_stops_the_robot():
+    case = _Case()
+    loop = case.loop("ce")
+    faults = LoopFaults.none(1).replace(torque_loss=1.0)
+    run = FaultyLoop(BatchProblem.replicate(loop, case.q0[None], case.v0[None]), case.regions, faults).run(200)
+    assert not run.armed.any() and run.estopped[0]
+    assert run.result().min_margin[0] > 0.0
