@@ -45,6 +45,9 @@ COMMANDS = {
 EXTRAS = {
     "matplotlib": "plots",
     "quadprog": "baselines",
+    "dask": "montecarlo",
+    "distributed": "montecarlo",
+    "scipy": "montecarlo",
 }
 
 # Options whose study imports an extra's module only when it gets there (at the end of a long

@@ -97,11 +97,14 @@ def test_no_process_imports_a_study():
 
 
 def test_every_study_command_is_registered_by_its_folder_name():
-    """One folder per study; its `command.py` is the sub-command (the campaign is `faults campaign`)."""
-    from sharedctl.services.cli import COMMANDS
+    """One folder per study; its `command.py` is the sub-command — the two fault studies are the actions
+    of `faults`: `faults campaign` (registered as `faults`) and `faults montecarlo`."""
+    from sharedctl.services.cli import COMMANDS, build_parser
 
     folders = sorted(p.parent.name for p in (ROOT / "services" / "studies").glob("*/command.py"))
     registered = {module.split(".")[3]: name for name, module in COMMANDS.items() if module.startswith(STUDIES + ".")}
-    assert sorted(registered) == folders
+    assert sorted(set(registered) | {"montecarlo"}) == folders
     assert all(name == folder for folder, name in registered.items() if folder != "campaign")
     assert registered["campaign"] == "faults"
+    args = build_parser("faults").parse_args(["faults", "montecarlo", "--runs", "1"])
+    assert args.handler.__module__ == STUDIES + ".montecarlo.command"

@@ -57,7 +57,7 @@ class SampledBatch:
             Y[L.obs] = e.observer.initial_state(problem.q0)
         self.fleet = Fleet(np.arange(N), Y, ArbiterArrays.initial(e.sharing, N), problem.operators, problem.theta,
                            Tally.empty(N, e.k))
-        self.sent = np.zeros((HISTORY, e.n, N))        # the last commands u_s per robot (a ring)
+        self.sent = np.zeros((e.n, N * HISTORY))       # the last commands u_s: robot i's ring at [i·H, (i+1)·H)
         self.sent_count = np.zeros(N, dtype=np.int64)  # commands sent so far (the ring's write position mod HISTORY)
         self.recovery_damping = SharedController.recovery_damping       # N s/m
         self.recovery_stiffness = SharedController.recovery_stiffness   # N/m
@@ -127,8 +127,7 @@ class SampledBatch:
             _restore(fleet, saved, ~running)
         moved = running & finite
         cols = np.flatnonzero(moved)
-        pos = self.sent_count[cols] % HISTORY
-        self.sent[pos, :, cols] = u_s[:, cols].T
+        self.sent[:, cols * HISTORY + self.sent_count[cols] % HISTORY] = u_s[:, cols]
         self.sent_count[cols] += 1
         u_s = np.where(moved, u_s, np.nan)
         return u_s, np.where(moved, dec.authority, -1), finite | ~running
@@ -139,17 +138,29 @@ class SampledBatch:
         longest = int(use.max()) if use.size else 0
         if longest == 0:
             return q, v
-        theta = self.fleet.theta
-        half = 0.5 * self.dt * self.dt
-        a = np.empty_like(q)
-        cols = np.arange(q.shape[1])
+        # the robots with commands to predict over, longest first: those still predicting at each
+        # iteration j (use ≥ longest − j) are then a prefix of them
+        cols = np.flatnonzero(use)
+        cols = cols[np.argsort(-use[cols], kind="stable")]
+        use = use[cols]
+        index = cols * HISTORY + self.sent_count[cols] - longest      # + j, mod HISTORY within each ring
+        theta = self.fleet.theta[:, cols]
+        qc, vc = q[:, cols], v[:, cols]
+        half, dt = 0.5 * self.dt * self.dt, self.dt
+        a = np.empty_like(qc)
+        descending = -use
         for j in range(longest):
-            active = j >= longest - use
-            index = (self.sent_count - longest + j) % HISTORY
-            u = self.sent[index, :, cols].T
-            acceleration(theta, v, u, a)
-            q = np.where(active, q + self.dt * v + half * a, q)
-            v = np.where(active, v + self.dt * a, v)
+            m = int(np.searchsorted(descending, j - longest, side="right"))   # use ≥ longest − j
+            ring = cols[:m] * HISTORY + (index[:m] - cols[:m] * HISTORY + j) % HISTORY
+            u = self.sent.take(ring, axis=1)
+            am, vm = a[:, :m], vc[:, :m]
+            acceleration(theta[:, :m], vm, u, am)
+            step = qc[:, :m] + dt * vm
+            step += half * am
+            qc[:, :m] = step
+            vm += dt * am
+        q, v = q.copy(), v.copy()
+        q[:, cols], v[:, cols] = qc, vc
         return q, v
 
 

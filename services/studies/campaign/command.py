@@ -24,7 +24,7 @@ from . import matrix as cp
 
 
 def add_parser(subparsers) -> None:
-    p = subparsers.add_parser("faults", help="fault injection tools: the fault campaign")
+    p = subparsers.add_parser("faults", help="fault studies: the campaign of real processes, the batched Monte-Carlo")
     sub = p.add_subparsers(dest="faults_command", required=True, metavar="ACTION")
     c = sub.add_parser("campaign", help="run scenarios × faults as demo runs and judge them on the ground truth")
     c.add_argument("--quick", action="store_true", help="every fault family once (~20 runs) instead of the full matrix")
@@ -43,6 +43,8 @@ def add_parser(subparsers) -> None:
     c.add_argument("--rejudge", metavar="LOGDIR",
                    help="run nothing: judge the rows of --json OUT again from the summaries kept in LOGDIR")
     p.set_defaults(handler=run)
+    from ..montecarlo.command import add_subparser
+    add_subparser(sub)
 
 
 class Forecasts:

@@ -145,7 +145,9 @@ class FaultyLoop:
         self.operator_every = max(1, int(operator_every))
         self.q, self.v = problem.q0.copy(), problem.v0.copy()
         depth = int(faults.feedback.max()) + 1
-        self.history = [(self.q.copy(), self.v.copy())] * depth     # [-1 - f]: the sample f periods old
+        self.history = np.repeat(np.vstack([self.q, self.v])[None], depth, axis=0)   # (depth, 2n, N), a ring
+        self.columns = np.arange(N)
+        self.wish = None                                            # the last wish handed to the controller
         slots = int(faults.transit.max()) + 1
         self.pending = np.zeros((slots, 3, N))
         self.pending_mask = np.zeros((slots, 3, N), bool)
@@ -175,15 +177,11 @@ class FaultyLoop:
     # ------------------------------------------------------------------------------
     def sample(self, age: np.ndarray):
         """(q, v) of the plant `age` (N,) periods ago, at the periods' starts."""
-        if not np.any(age):
-            return self.history[-1]
-        q = np.empty_like(self.q)
-        v = np.empty_like(self.v)
-        for a in np.unique(age):
-            cols = age == a
-            hq, hv = self.history[-1 - int(a)]
-            q[:, cols], v[:, cols] = hq[:, cols], hv[:, cols]
-        return q, v
+        depth, n = self.history.shape[0], self.model.n
+        if depth == 1:
+            return self.q, self.v
+        x = self.history[(self.k - age) % depth, :, self.columns].T
+        return x[:n], x[n:]
 
     def operator(self, q_seen, v_seen):
         """The console's command of this period (sent or not) and what the controller holds: (wish, u_h, v_h)."""
@@ -213,6 +211,11 @@ class FaultyLoop:
         q_d = np.where(self.has_cmd, sent_wish.q, q_seen)
         zero = np.zeros_like(q_d)
         wish = DesiredBatch(q_d, np.where(fresh, sent_wish.q_dot, zero), np.where(fresh, sent_wish.q_ddot, zero))
+        last = self.wish
+        if last is not None and all(np.array_equal(a, b) for a, b in ((last.q, wish.q), (last.q_dot, wish.q_dot),
+                                                                       (last.q_ddot, wish.q_ddot))):
+            wish = last                 # the same wish: the controller keeps its projected references
+        self.wish = wish
         kp = self.ops.kp
         d = np.where(fresh, self.cmd_deflection, 0.0)
         return wish, kp * d, np.where(fresh, intent_of(kp, d), 0.0)
@@ -271,8 +274,9 @@ class FaultyLoop:
                 self.min_margin = np.where(lower, m, self.min_margin)
                 self.min_margin_t = np.where(lower, (now + self.physics_ms) * 1e-3, self.min_margin_t)
         self.k += 1
-        self.history.append((self.q, self.v))
-        self.history.pop(0)
+        n = self.model.n
+        slot = self.k % self.history.shape[0]
+        self.history[slot, :n], self.history[slot, n:] = self.q, self.v
 
     def run(self, periods: int) -> "FaultyLoop":
         for _ in range(periods):
