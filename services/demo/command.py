@@ -9,9 +9,10 @@ its own children; between the operator and the controller it waits, at most 3 s,
 robot to come to rest: a controller that exits leaves the wheels unpowered and a moving robot
 would coast on), and prints a summary: violations, min_margin and final_speed from
 GroundTruth; tracking and authority (the names of `sharedctl sim --json`) from RobotState;
-and the in-process sampled simulation of the same scenario (`reference`) with the deviation
-between the two. Exit 0 only if nothing was violated, no emergency stop cut the run short, and
-every child exited cleanly. Robot and controller write their exit summaries as JSON in the log
+and the in-process sampled simulation of the same scenario (`reference`, computed beside the
+run by a child of the lowest priority: reference_job.py) with the deviation between the two.
+Exit 0 only if nothing was violated, no emergency stop cut the run short, and every child exited
+cleanly. Robot and controller write their exit summaries as JSON in the log
 directory (`--json`); the demo's own JSON holds them, under `processes.<name>.summary`.
 
 Wiring (Zenoh peers do not forward between peers they connect, so the operator console
@@ -48,7 +49,8 @@ from sharedctl.services.children import (Child, free_udp_port, raise_priority, s
 from sharedctl.services.faults.stack import ESTOP_OPERATOR, FaultStack, add_arguments as add_fault_arguments
 from sharedctl.services.security.secure_stack import OPERATOR, SecureStack, add_arguments as add_secure_arguments
 from sharedctl.services.recording.launch import add_argument as add_record_argument, open_demo_recording
-from .measure import TOLERANCE, Recorder, deviation, measure, plant_reference_run, reference_run, states_at
+from .measure import TOLERANCE, Recorder, deviation, measure, states_at
+from .reference_job import ReferenceJob
 from sharedctl.services.lifecycle import StopFlag
 from sharedctl.services.scenario_files import load
 from sharedctl.services.summary_output import emit, read_json
@@ -143,6 +145,8 @@ def run(args) -> int:
     failure = None
     robot_priority = None
     start = time.monotonic()
+    # the references depend on the scenario alone: computed beside the run, at the lowest priority
+    reference = None if args.no_reference else ReferenceJob(scenario_arg, args.controller, duration, log_dir)
     try:
         recording = open_demo_recording(args.record, args.robot_id, scenario_arg, scenario.name, can_controller,
                                         seed=None if faults.empty else faults.plan.seed)   # docs/recording.md
@@ -234,12 +238,17 @@ def run(args) -> int:
                "wall_seconds": time.monotonic() - start, **secure.summary(rec)}
     if recording is not None:
         summary["recording"] = recording_summary
-    if not args.no_reference and failure is None:
-        summary["reference"] = reference_run(scenario, args.controller, duration)
-        summary["deviation"] = deviation(result, summary["reference"])
-        summary["reference_plant"] = plant_reference_run(scenario, args.controller, duration)
-        summary["deviation_plant"] = deviation(result, summary["reference_plant"])
-        summary["tolerance"] = TOLERANCE
+    if reference is not None and (failure is not None or stop.stopped):
+        reference.stop()
+    elif reference is not None:
+        try:
+            summary["reference"], summary["reference_plant"] = reference.result(REFERENCE_TIMEOUT + 2.0 * duration)
+        except RuntimeError as exc:
+            summary["reference_error"] = str(exc)
+        else:
+            summary["deviation"] = deviation(result, summary["reference"])
+            summary["deviation_plant"] = deviation(result, summary["reference_plant"])
+            summary["tolerance"] = TOLERANCE
     clean = all(c.clean for c in children.values()) and len(children) == 3 and secure.clean
     summary["ok"] = bool(failure is None and clean and result["violations"] == 0 and result["truth_samples"] > 0
                          and result["estops"] == 0)   # an estop means the scenario did not run
@@ -252,6 +261,7 @@ def run(args) -> int:
 
 
 MAX_ESTOP_STATES = 3     # estops whose surroundings the JSON keeps
+REFERENCE_TIMEOUT = 60.0   # s, plus twice the run's duration: the most the demo waits for its references
 
 
 def _fault_instants(injected: dict, plan, result: dict) -> list[tuple[str, float]]:

@@ -12,6 +12,7 @@ guarantee's envelope left the set.
 from __future__ import annotations
 
 import json
+import signal
 import sys
 import time
 from functools import partial
@@ -40,6 +41,9 @@ def add_subparser(sub) -> None:
     m.add_argument("--brake-torque", type=float, metavar="NM",
                    help="every robot's fail-safe brake torque per wheel, N·m (default: the robot's own; "
                         "0: robots without brakes, a configuration the guarantee does not cover)")
+    m.add_argument("--calibrate", metavar="CAMPAIGN_JSON",
+                   help="also run the batched model on the matched cases of a real-process campaign "
+                        "(`faults campaign --json`) and compare minimum margins (calibration.py)")
     m.add_argument("--json", metavar="OUT", help="write the summary JSON here")
     m.add_argument("--report", metavar="DIR",
                    help="write README.md, the envelope maps and the counterexamples into DIR")
@@ -81,6 +85,7 @@ def run(args) -> int:
     columns = (TextColumn("[bold]montecarlo[/bold] runs"), BarColumn(), MofNCompleteColumn(),
                TextColumn("viol. {task.fields[violations]}"), TimeElapsedColumn(), TimeRemainingColumn())
     start = time.monotonic()
+    previous = signal.signal(signal.SIGTERM, _interrupt)     # SIGTERM as Ctrl-C: the cluster is closed on the way out
     try:
         with Progress(*columns, console=console, transient=False) as progress:
             task = progress.add_task("", total=args.runs, violations=0)
@@ -96,11 +101,23 @@ def run(args) -> int:
     except ImportError as exc:
         print(f"sharedctl faults montecarlo: {exc}", file=sys.stderr)
         return 2
+    except KeyboardInterrupt:
+        print(f"sharedctl faults montecarlo: interrupted after {tally['runs']} of {args.runs} runs; nothing written",
+              file=sys.stderr)
+        return 130
+    finally:
+        signal.signal(signal.SIGTERM, previous)
     summary = summarize(results, time.monotonic() - start)
     summary.update(seed=args.seed, chunk_runs=args.chunk_runs, duration_s=args.duration, workers=info.workers,
                    brake_torque=args.brake_torque,
                    cluster_startup_seconds=info.startup_seconds, scheduler=scheduler,
                    command=" ".join(["sharedctl faults montecarlo", *sys.argv[3:]]) if len(sys.argv) > 3 else None)
+    if args.calibrate:
+        from . import calibration
+        rows = calibration.matched(json.loads(Path(args.calibrate).read_text())["rows"])
+        entries = calibration.table(rows)
+        summary["calibration"] = {"campaign": args.calibrate, "classes": calibration.summary(entries),
+                                  "table": entries}
     if args.json:
         Path(args.json).write_text(json.dumps(summary, indent=1) + "\n")
     if args.report:
@@ -110,3 +127,7 @@ def run(args) -> int:
                   f"({summary['violations_inside_envelope']} inside the envelope), min margin "
                   f"{summary['min_margin']:.4f} m, {summary['runs_per_s']:.1f} runs/s on {info.workers} workers")
     return 0 if summary["violations_inside_envelope"] == 0 else 1
+
+
+def _interrupt(signum, frame):
+    raise KeyboardInterrupt

@@ -49,6 +49,7 @@ def markdown(summary: dict, plots: list[str], replays: list[Path]) -> str:
     lines.append("")
     for name in plots:
         lines += [f"![{name}]({name})", ""]
+    lines += _calibration(summary.get("calibration"))
     lines += ["## Counterexamples", ""]
     if not replays:
         lines += ["None: no run left the set.", ""]
@@ -57,6 +58,25 @@ def markdown(summary: dict, plots: list[str], replays: list[Path]) -> str:
         lines += [f"- run {case['run']} (`{case['family']}`, {case['law']}, min margin {case['min_margin']:.4f} m): "
                   f"`sharedctl demo --scenario {path.parent.name}/{path.name} {faults}`"]
     return "\n".join(lines) + "\n"
+
+
+def _calibration(calibration: dict | None) -> list[str]:
+    if not calibration:
+        return []
+    lines = ["## Calibration against the real processes", "",
+             f"The matched cases of `{calibration['campaign']}` (real `sharedctl demo` runs judged on the simulator's "
+             "ground truth; services/studies/montecarlo/calibration.py says which match and the classes), run "
+             "again on the batched model:", "",
+             "| class | cases | agree | tolerance (m) | largest difference (m) | disagree |",
+             "|---|---:|---:|---:|---:|---|"]
+    for kind, c in calibration["classes"].items():
+        lines.append(f"| {kind} | {c['cases']} | {c['agree']} | {c['tolerance_m']} | {c['max_abs_difference_m']:.4f} | "
+                     f"{', '.join(f'`{i}`' for i in c['disagree']) or '—'} |")
+    lines += ["", "| case | class | ground truth (m) | model (m) | difference (m) |", "|---|---|---:|---:|---:|"]
+    for e in calibration["table"]:
+        lines.append(f"| `{e['id']}` | {e['class']} | {e['ground_truth']:.4f} | {e['model']:.4f} | "
+                     f"{e['difference']:+.4f}{'' if e['agrees'] else ' ✗'} |")
+    return lines + [""]
 
 
 def _counterexamples(cases: list[dict], folder: Path) -> list[Path]:
