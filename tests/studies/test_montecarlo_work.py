@@ -59,3 +59,23 @@ def test_the_summary_counts_runs_and_bounds_each_family_by_clopper_pearson():
     assert s["runs_per_s"] == 3.0
     kill = next(f for f in s["families"] if f["family"] == "kill")
     assert kill["upper_95"] == upper_95(1, 4) and kill["violations"] == 1
+
+
+def test_a_counterexample_is_drawn_again_from_its_chunk_as_a_scenario_the_processes_take():
+    import tomllib
+
+    from sharedctl.scenario import parse
+    from sharedctl.services.studies.montecarlo.cases import fault_specs
+    from sharedctl.services.studies.montecarlo.replay import rebuild
+    from sharedctl.services.studies.montecarlo.report import scenario_toml
+
+    runs, chunk_runs, seed = 20, 8, 4
+    chunk = Chunk(index=1, first_run=8, runs=8, seed=seed)          # the second chunk: family "can"
+    case = build(1, 8, chunk_rng(chunk))
+    data, faults = rebuild(13, runs, seed, chunk_runs, FAMILIES)
+    assert faults == fault_specs(case, 5) and any(f.startswith("can.loss=") for f in faults)
+    assert data["initial"]["q"] == [float(x) for x in case.draws["q0"][:, 5]]
+    assert data["human"]["deflection"] == float(case.draws["deflection"][5])
+    loop, q0, _ = parse(tomllib.loads(scenario_toml(data, faults))).closed_loop()
+    np.testing.assert_allclose(q0, case.draws["q0"][:, 5])
+    assert loop.controller.name == case.law

@@ -100,16 +100,23 @@ def _inside_points(rng, regions, count: int, margin: float) -> np.ndarray:
     return np.hstack(out)[:, :count]
 
 
-def scenario_data(regions, q0, target, kp: float, law: str) -> dict:
-    """The scenario mapping (sharedctl/scenario.py) of one run: `sharedctl sim`/`demo` replay it."""
-    return {
+def scenario_data(regions, q0, target, kp: float, law: str, deflection: float = 1.0,
+                  brake_torque: float | None = None) -> dict:
+    """The scenario mapping (sharedctl/scenario.py) of one run: `sharedctl sim`/`demo` replay it (a
+    `brake_torque` other than the robot's own goes to `[robot_sim]`). The robot's true parameters are the
+    controller's: a scenario cannot say they differ (the `mismatch` family's counterexamples cannot be
+    replayed as they ran)."""
+    data = {
         "name": "montecarlo", "duration": DURATION, "dt": 0.001, "controller": law,
         "robot": {"kind": "omni3"},
         "region": [{"K": [list(map(float, row)) for row in K], "T": list(map(float, T))} for K, T in regions],
         "initial": {"q": [float(x) for x in q0], "qdot": [0.0, 0.0, 0.0]},
         "desired": {"kind": "point", "at": [float(x) for x in target]},
-        "human": {"kind": "adversarial", "kp": float(kp)},
+        "human": {"kind": "adversarial", "kp": float(kp), "deflection": float(deflection)},
     }
+    if brake_torque is not None:
+        data["robot_sim"] = {"brake_torque": float(brake_torque)}
+    return data
 
 
 def build(index: int, runs: int, rng: np.random.Generator, families: tuple = FAMILIES) -> ChunkCase:

@@ -44,6 +44,9 @@ def add_subparser(sub) -> None:
     m.add_argument("--calibrate", metavar="CAMPAIGN_JSON",
                    help="also run the batched model on the matched cases of a real-process campaign "
                         "(`faults campaign --json`) and compare minimum margins (calibration.py)")
+    m.add_argument("--replay", type=int, default=0, metavar="K",
+                   help="replay the first K counterexamples outside the envelope once in the real processes "
+                        "(`sharedctl demo --scenario … --fault …`, about 10 s each) and report what they did")
     m.add_argument("--json", metavar="OUT", help="write the summary JSON here")
     m.add_argument("--report", metavar="DIR",
                    help="write README.md, the envelope maps and the counterexamples into DIR")
@@ -109,7 +112,7 @@ def run(args) -> int:
         signal.signal(signal.SIGTERM, previous)
     summary = summarize(results, time.monotonic() - start)
     summary.update(seed=args.seed, chunk_runs=args.chunk_runs, duration_s=args.duration, workers=info.workers,
-                   brake_torque=args.brake_torque,
+                   brake_torque=args.brake_torque, families_run=list(families),
                    cluster_startup_seconds=info.startup_seconds, scheduler=scheduler,
                    command=" ".join(["sharedctl faults montecarlo", *sys.argv[3:]]) if len(sys.argv) > 3 else None)
     if args.calibrate:
@@ -118,6 +121,15 @@ def run(args) -> int:
         entries = calibration.table(rows)
         summary["calibration"] = {"campaign": args.calibrate, "classes": calibration.summary(entries),
                                   "table": entries}
+    if args.replay > 0:
+        import tempfile
+
+        from .replay import replay
+        beyond = [c for c in summary["counterexamples"] if not c["inside_envelope"]]
+        plan = {"runs": args.runs, "seed": args.seed, "chunk_runs": args.chunk_runs, "families": families,
+                "brake_torque": args.brake_torque}
+        with tempfile.TemporaryDirectory(prefix="sharedctl-montecarlo-replay-") as workdir:
+            summary["replays"] = replay(beyond, Path(workdir), args.duration, args.replay, plan)
     if args.json:
         Path(args.json).write_text(json.dumps(summary, indent=1) + "\n")
     if args.report:

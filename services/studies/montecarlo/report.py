@@ -50,6 +50,7 @@ def markdown(summary: dict, plots: list[str], replays: list[Path]) -> str:
     for name in plots:
         lines += [f"![{name}]({name})", ""]
     lines += _calibration(summary.get("calibration"))
+    lines += _replays(summary.get("replays"))
     lines += ["## Counterexamples", ""]
     if not replays:
         lines += ["None: no run left the set.", ""]
@@ -76,6 +77,22 @@ def _calibration(calibration: dict | None) -> list[str]:
     for e in calibration["table"]:
         lines.append(f"| `{e['id']}` | {e['class']} | {e['ground_truth']:.4f} | {e['model']:.4f} | "
                      f"{e['difference']:+.4f}{'' if e['agrees'] else ' ✗'} |")
+    return lines + [""]
+
+
+def _replays(rows: list[dict] | None) -> list[str]:
+    if not rows:
+        return []
+    lines = ["## Counterexamples beyond the envelope, replayed in the real processes", "",
+             "Each run drawn again from its chunk and run once as `sharedctl demo --scenario run-N.toml --fault …`, "
+             "judged on the simulator's ground truth:", "",
+             "| run | family | law | faults | model min margin (m) | real min margin (m) | real violations | "
+             "real estops | error |", "|---:|---|---|---|---:|---:|---:|---:|---|"]
+    for r in rows:
+        real = "—" if r["real_min_margin"] is None else f"{r['real_min_margin']:.4f}"
+        lines.append(f"| {r['run']} | `{r['family']}` | {r['law']} | {' '.join(r['faults'])} | "
+                     f"{r['model_min_margin']:.4f} | {real} | {r['real_violations']} | {r['real_estops']} | "
+                     f"{r['error'] or ''} |")
     return lines + [""]
 
 

@@ -42,7 +42,7 @@ def run_chunk(chunk: Chunk, duration: float = DURATION, families: tuple = FAMILI
         examples.append({"run": chunk.first_run + int(i), "family": case.family, "law": case.law,
                          "min_margin": float(out.min_margin[i]), "inside_envelope": bool(case.inside[i]),
                          "scenario": scenario_data(case.regions, d["q0"][:, i], d["target"][:, i], d["kp"][i],
-                                                   case.law),
+                                                   case.law, d["deflection"][i], brake_torque),
                          "faults": fault_specs(case, int(i))})
     draws = {k: np.asarray(v).tolist() for k, v in case.draws.items()
              if k in ("can_delay_ms", "can_loss", "fault_t", "hang_ms", "operator_delay_ms", "operator_loss")}
