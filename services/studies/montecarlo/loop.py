@@ -285,7 +285,12 @@ class FaultyLoop:
 
     def run_to_rest(self, limit: float = 3.0) -> "FaultyLoop":
         """Periods on, until every robot whose controller is gone (killed, estopped) is disarmed and at
-        rest, at most `limit` s; controllers still alive keep running."""
+        rest, at most `limit` s; controllers still alive keep running (with their operators). The run is
+        over: a kill or a hang due from now on does not come (as in `sharedctl demo`, whose faults fire
+        within its duration)."""
+        f, k = self.faults, self.k
+        self.faults = f.replace(kill_at=np.where(f.kill_at >= k, NEVER, f.kill_at),
+                                hang_at=np.where(f.hang_at >= k, NEVER, f.hang_at))
         for _ in range(int(limit / PERIOD)):
             gone = (self.k >= self.faults.kill_at) | self.estopped
             moving = gone & (self.armed.any(axis=0) | np.any(np.abs(self.v) >= 1e-3, axis=0))

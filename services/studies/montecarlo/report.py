@@ -53,7 +53,7 @@ def markdown(summary: dict, plots: list[str], replays: list[Path]) -> str:
     lines += _replays(summary.get("replays"))
     lines += ["## Counterexamples", ""]
     if not replays:
-        lines += ["None: no run left the set.", ""]
+        lines += ["None: no run left the set, so none beyond the envelope to replay in the processes.", ""]
     for case, path in zip(summary["counterexamples"], replays):
         faults = " ".join(f"--fault {spec}" for spec in case["faults"])
         lines += [f"- run {case['run']} (`{case['family']}`, {case['law']}, min margin {case['min_margin']:.4f} m): "
@@ -72,12 +72,17 @@ def _calibration(calibration: dict | None) -> list[str]:
              "|---|---:|---:|---:|---:|---|"]
     for kind, c in calibration["classes"].items():
         lines.append(f"| {kind} | {c['cases']} | {c['agree']} | {c['tolerance_m']} | {c['max_abs_difference_m']:.4f} | "
-                     f"{', '.join(f'`{i}`' for i in c['disagree']) or '—'} |")
+                     f"{', '.join(f'`{_cell(i)}`' for i in c['disagree']) or '—'} |")
     lines += ["", "| case | class | ground truth (m) | model (m) | difference (m) |", "|---|---|---:|---:|---:|"]
     for e in calibration["table"]:
-        lines.append(f"| `{e['id']}` | {e['class']} | {e['ground_truth']:.4f} | {e['model']:.4f} | "
+        lines.append(f"| `{_cell(e['id'])}` | {e['class']} | {e['ground_truth']:.4f} | {e['model']:.4f} | "
                      f"{e['difference']:+.4f}{'' if e['agrees'] else ' ✗'} |")
     return lines + [""]
+
+
+def _cell(text: str) -> str:
+    """`text` inside a markdown table cell (a case id holds `|`)."""
+    return text.replace("|", "\\|")
 
 
 def _replays(rows: list[dict] | None) -> list[str]:
