@@ -21,7 +21,7 @@ Per control period k (2 ms) and robot, in this order:
 
 The margin is the set's own rows, normalised, on the plant's true q after every physics step —
 it shares no code with the controller, its backup model or FeasibleSet (as
-tests/test_fault_envelope_properties.py's oracle). tests/studies/test_montecarlo_loop.py holds a
+tests/test_fault_envelope_properties.py's oracle). tests/test_montecarlo_loop.py holds a
 batch to that scalar FaultLoop, robot by robot.
 """
 from __future__ import annotations

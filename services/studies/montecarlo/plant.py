@@ -5,7 +5,7 @@ limits and fail-safe brakes of `RobotSimConfig`, and `step` is `Plant.step` over
 operation for operation: the wheel torques clamped to ±torque_limit and zeroed on a wheel at the
 speed limit they would push further (at the step's start), the friction b ω + c tanh(ω/ω_s) and
 the brakes c_b tanh(ω/ω_b) on the disarmed wheels, one RK4 step with all of them held.
-tests/studies/test_montecarlo_loop.py holds it to `Plant.step` to rounding.
+tests/test_montecarlo_loop.py holds it to `Plant.step` to rounding.
 """
 from __future__ import annotations
 
