@@ -15,14 +15,11 @@ CAMPAIGN = Path(__file__).resolve().parents[2] / "docs" / "faults" / "campaign.j
 EVERY = 4
 
 
-def _loses_actuation(row) -> bool:
-    values = {k: [float(x) for x in v.split(",")] for k, _, v in (f.partition("=") for f in row["faults"])}
-    return "controller.kill_at" in values or values.get("controller.stop_at", [0, 0])[1] >= calibration.WATCHDOG - 0.002
-
 
 def test_matched_cases_of_the_real_campaign_agree_with_the_model_within_each_classs_tolerance():
     ce = [r for r in calibration.matched(json.loads(CAMPAIGN.read_text())["rows"]) if r["law"] == "ce"]
-    rows = [r for r in ce if _loses_actuation(r)] + [r for r in ce if not _loses_actuation(r)][::EVERY]
+    lost = [r for r in ce if calibration.loses_actuation(r)]
+    rows = lost + [r for r in ce if not calibration.loses_actuation(r)][::EVERY]
     entries = calibration.table(rows)
     classes = calibration.summary(entries)
     steady, approach = classes["steady"], classes["approach"]

@@ -27,13 +27,14 @@ from sharedctl.batched import BatchProblem
 from sharedctl.services.scenario_files import load
 
 from .loop import NEVER, PERIOD, FaultyLoop, LoopFaults
+from .plant import DEFAULT_CONFIG
 
 MATCHED_FAULTS = ("can.delay_ms", "can.loss", "controller.kill_at", "controller.stop_at")
 REST_LIMIT = 3.0
 STEADY_TOLERANCE_M = 0.005
 APPROACH_TOLERANCE_M = 0.035        # ~25 ms of clock offset at the fastest approach
 APPROACH_SPEED = 0.3                # m/s towards the wall at the fault's instant (the model's)
-WATCHDOG = 0.1                      # s, T_w of RobotSimConfig
+WATCHDOG = DEFAULT_CONFIG.watchdog_timeout       # s, T_w of the drives
 
 
 def matched(rows: list[dict]) -> list[dict]:
@@ -49,6 +50,12 @@ def matched(rows: list[dict]) -> list[dict]:
 
 def _values(row: dict) -> dict:
     return {k: [float(x) for x in v.split(",")] for k, _, v in (f.partition("=") for f in row["faults"])}
+
+
+def loses_actuation(row: dict) -> bool:
+    """A kill, or a hang that reaches the drives' watchdog (within a period): the drives disarm."""
+    values = _values(row)
+    return "controller.kill_at" in values or values.get("controller.stop_at", [0, 0])[1] >= WATCHDOG - PERIOD
 
 
 def model_margins(rows: list[dict], duration: float | None = None) -> tuple[list[float], list[float]]:
@@ -90,9 +97,7 @@ def table(rows: list[dict]) -> list[dict]:
     model, speed = model_margins(rows)
     out = []
     for r, m, v in zip(rows, model, speed):
-        values = _values(r)
-        lost = "controller.kill_at" in values or values.get("controller.stop_at", [0, 0])[1] >= WATCHDOG - 0.002
-        kind = "approach" if lost and v > APPROACH_SPEED else "steady"
+        kind = "approach" if loses_actuation(r) and v > APPROACH_SPEED else "steady"
         tolerance = APPROACH_TOLERANCE_M if kind == "approach" else STEADY_TOLERANCE_M
         difference = m - float(r["min_margin"])
         out.append({"id": r["id"], "law": r["law"], "faults": r["faults"], "class": kind,

@@ -25,7 +25,7 @@ import numpy as np
 from sharedctl.batched import BatchProblem, OperatorBatch
 from sharedctl.scenario import parse
 
-from .loop import NEVER, PERIOD, LoopFaults
+from .loop import NEVER, PERIOD, LoopFaults, Oracle
 
 FAMILIES = ("none", "can", "kill", "hang", "operator", "mismatch", "beyond")
 LAWS = ("ce", "nce", "of")
@@ -81,22 +81,12 @@ def _region(rows):
     return (np.array([r for r, _ in rows], float), np.array([t for _, t in rows], float))
 
 
-def _margin(regions, q: np.ndarray) -> np.ndarray:
-    """max over polytopes of min over rows of −(k q + t), rows normalised (q: (3, M))."""
-    best = None
-    for K, T in regions:
-        norms = np.linalg.norm(K, axis=1)
-        m = np.min(-((K @ q) + T[:, None]) / norms[:, None], axis=0)
-        best = m if best is None else np.maximum(best, m)
-    return best
-
-
 def _inside_points(rng, regions, count: int, margin: float) -> np.ndarray:
     """`count` points (3, count), uniform over the set at least `margin` from its faces, ψ small."""
     out = []
     while sum(p.shape[1] for p in out) < count:
         q = np.vstack([rng.uniform(-3, 3, (2, 4 * count)), rng.uniform(-0.3, 0.3, (1, 4 * count))])
-        out.append(q[:, _margin(regions, q) >= margin])
+        out.append(q[:, Oracle(regions).margin(q) >= margin])
     return np.hstack(out)[:, :count]
 
 
