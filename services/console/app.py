@@ -38,6 +38,7 @@ from sharedctl.protocol.messages import Event, OperatorCommand, RobotState
 from sharedctl.protocol.msgpack_codec import decode_message, encode_message
 from sharedctl.protocol.wire_types import ROBOT_DIMS
 
+from .. import zenoh_qos
 from ..lifecycle import RateClock, StopFlag
 from ..security.zenoh_config import open_configured
 from .dashboard import DashboardView, map_size, render
@@ -216,7 +217,7 @@ class ConsoleApp:
                 session.declare_subscriber(keys.state_key(opts.robot_id), self.telemetry.on_state),
                 session.declare_subscriber(keys.events_key(opts.robot_id), self.telemetry.on_event),
             ]
-            publisher = session.declare_publisher(keys.operator_cmd_key(opts.robot_id))
+            publisher = zenoh_qos.declare_publisher(session, keys.operator_cmd_key(opts.robot_id))
             sender = threading.Thread(target=self.sender, args=(publisher, stop), name="operator-sender", daemon=True)
             sender.start()
             leaser = threading.Thread(target=self.lease.run, args=(session, stop), name="operator-lease", daemon=True)

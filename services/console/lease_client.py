@@ -22,6 +22,7 @@ from sharedctl.protocol.errors import ProtocolError
 from sharedctl.protocol.messages import LeaseAction, LeaseReply, LeaseRequest
 from sharedctl.protocol.msgpack_codec import decode_message, encode_message
 
+from .. import zenoh_qos
 from ..lifecycle import steady_wall
 
 RETRY = 0.25          # s between lease queries while what we want differs from what we have
@@ -90,7 +91,8 @@ class LeaseClient:
         try:
             payload = encode_message(request)
             attachment = None if self.signer is None else self.signer.attachment(self.key, payload)
-            for answer in session.get(self.key, payload=payload, attachment=attachment, timeout=self.timeout):
+            for answer in session.get(self.key, payload=payload, attachment=attachment, timeout=self.timeout,
+                                      **zenoh_qos.options("lease")):
                 if answer.ok is None:
                     continue
                 try:

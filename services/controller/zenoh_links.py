@@ -19,6 +19,7 @@ import zenoh
 from sharedctl.protocol import keys
 from sharedctl.protocol.msgpack_codec import encode_message
 
+from .. import zenoh_qos
 from . import command_intake, lease_queries
 from .command_intake import CommandIntake, attachment_bytes
 
@@ -36,9 +37,9 @@ class ControllerLinks:
         self.robot_id, self.policy, self.lease_guard, self.lock = robot_id, policy, lease_guard, lock
         self.lease_verify = lease_verify      # operator identity of lease queries (signing.py), or None
         self.events, self.verbose = events, verbose       # events: telemetry.EventLimiter
-        self.state_pub = session.declare_publisher(keys.state_key(robot_id))
-        self.event_pub = session.declare_publisher(keys.events_key(robot_id))
-        self.alive_pub = session.declare_publisher(keys.alive_key(robot_id, role))
+        self.state_pub = zenoh_qos.declare_publisher(session, keys.state_key(robot_id))
+        self.event_pub = zenoh_qos.declare_publisher(session, keys.events_key(robot_id))
+        self.alive_pub = zenoh_qos.declare_publisher(session, keys.alive_key(robot_id, role))
         self.token = session.liveliness().declare_token(keys.alive_key(robot_id, role))
         self.subscriber = session.declare_subscriber(keys.operator_cmd_key(robot_id), command_intake.channel())
         self.intake = CommandIntake(self.subscriber, policy)
@@ -67,7 +68,7 @@ class ControllerLinks:
                                      time.monotonic(), time.time(), self.policy.lease_limit,
                                      attachment_bytes(query), self.lease_verify)
         try:
-            query.reply(keys.lease_key(self.robot_id), encode_message(reply))
+            query.reply(keys.lease_key(self.robot_id), encode_message(reply))   # with its query's QoS (zenoh_qos)
         except Exception as exc:  # noqa: BLE001 — a vanished querier must not stop anything
             print(f"sharedctl controller: lease reply not sent: {exc}", file=sys.stderr)
 

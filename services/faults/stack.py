@@ -224,9 +224,10 @@ class FaultStack:
         from sharedctl.protocol.messages import ControlRequest, OperatorCommand
         from sharedctl.protocol.msgpack_codec import encode_message
 
+        from .. import zenoh_qos
         from ..lifecycle import steady_wall
         key = keys.operator_cmd_key(robot_id)
-        publisher = session.declare_publisher(key)
+        publisher = zenoh_qos.declare_publisher(session, key)
         self.publish = publisher.put
         if any(f.action == "evict" for f in self.plan.processes):
             from sharedctl.protocol.msgpack_codec import decode_message

@@ -58,6 +58,7 @@ import zenoh
 
 from sharedctl.protocol import keys
 
+from .. import zenoh_qos
 from ..lifecycle import StopFlag
 from ..security.zenoh_config import ZenohConfigError, open_from_file
 from ..zenoh_session import EndpointError, check_loopback, open_session
@@ -235,7 +236,7 @@ class ZenohRelay:
         try:
             pub = self.publishers.get(key)
             if pub is None:
-                pub = self.publishers[key] = session.declare_publisher(key)
+                pub = self.publishers[key] = zenoh_qos.declare_publisher(session, key)   # the stream's own QoS
             pub.put(data, attachment=attachment)
         except Exception:  # noqa: BLE001 — a failed put is counted, never fatal
             d.publish_errors += 1

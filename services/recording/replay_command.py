@@ -23,7 +23,7 @@ import msgpack
 from sharedctl.protocol.errors import ProtocolError
 from sharedctl.protocol.msgpack_codec import decode_message
 
-from .. import zenoh_session
+from .. import zenoh_qos, zenoh_session
 from ..lifecycle import StopFlag
 from .mcap_reading import NotARecording, RecordedMessage, RecordingReader, check_readable
 
@@ -105,7 +105,7 @@ def replay(path, session, speed: float = 1.0, stop: StopFlag | None = None) -> R
             publisher = publishers.get(key)
             if publisher is None:
                 try:
-                    publisher = publishers[key] = session.declare_publisher(key)
+                    publisher = publishers[key] = zenoh_qos.declare_publisher(session, key)   # the stream's QoS
                 except Exception:  # noqa: BLE001 — a key Zenoh refuses (only possible for undecoded records)
                     report.skipped += 1
                     continue

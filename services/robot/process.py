@@ -27,6 +27,7 @@ from sharedctl.protocol.errors import ProtocolError
 from sharedctl.protocol.messages import GroundTruth, Heartbeat
 from sharedctl.protocol.msgpack_codec import encode_message
 
+from .. import zenoh_qos
 from ..can_transport import Frame, Transport, transport_for
 from ..lifecycle import RateClock, StopFlag
 from .simulation import RobotSimulation, is_own_direction
@@ -67,8 +68,8 @@ class RobotProcess:
         self.counts: Counter = Counter()
         self.truth_seq = 0
         self.heartbeat_seq = 0
-        self.truth_publisher = session.declare_publisher(keys.truth_key(robot_id)) if session else None
-        self.alive_publisher = session.declare_publisher(keys.alive_key(robot_id, ROLE)) if session else None
+        self.truth_publisher = zenoh_qos.declare_publisher(session, keys.truth_key(robot_id)) if session else None
+        self.alive_publisher = zenoh_qos.declare_publisher(session, keys.alive_key(robot_id, ROLE)) if session else None
         self.token = session.liveliness().declare_token(keys.alive_key(robot_id, ROLE)) if session else None
         self.drive_restart = (1, 0.5)                       # (axis, s silent) a restart request means
         self._restart_requested = False

@@ -18,9 +18,10 @@ class StandIn:
     """`session.get` answered by a function of the request (None: nobody answers)."""
 
     def __init__(self, answer):
-        self.answer, self.requests, self.attachments = answer, [], []
+        self.answer, self.requests, self.attachments, self.qos = answer, [], [], []
 
-    def get(self, key, payload, timeout, attachment=None):
+    def get(self, key, payload, timeout, attachment=None, **qos):
+        self.qos.append(qos)
         request = decode_message(payload, None, expect=LeaseRequest)
         self.requests.append((key, request))
         self.attachments.append((payload, attachment))
@@ -38,6 +39,15 @@ def test_a_granted_take_means_holding_and_names_the_lease_key():
     assert client.ask(session, LeaseAction.TAKE).granted and client.holding
     assert session.requests[0][0] == "sharedctl/v1/r1/control/lease"
     assert client.status() == "held by this console"
+
+
+def test_a_lease_query_asks_for_the_control_paths_qos():
+    import zenoh
+
+    session = StandIn(lambda req: reply(req, True, "alice"))
+    LeaseClient("r1", "alice", "a1").ask(session, LeaseAction.TAKE)
+    assert session.qos == [{"priority": zenoh.Priority.REAL_TIME, "congestion_control": zenoh.CongestionControl.BLOCK,
+                            "express": True}]
 
 
 def test_a_refused_take_shows_the_holder():

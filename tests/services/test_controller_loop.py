@@ -62,7 +62,7 @@ class MemorySession:
     def __init__(self):
         self.publishers, self.subscriptions = {}, {}
 
-    def declare_publisher(self, key):
+    def declare_publisher(self, key, **qos):
         return self.publishers.setdefault(key, Publisher())
 
     def declare_subscriber(self, key, handler):

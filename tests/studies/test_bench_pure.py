@@ -248,3 +248,25 @@ def test_the_work_of_overrunning_periods_comes_only_from_controllers_that_had_th
     busy = {"ticks": 100, "rate_hz": 500.0, "misses_working": 10, "misses_working_cpu_p50_us": 2900.0}
     assert merge_summaries([quiet, quiet, busy])["misses_working_cpu_p50_us"] == 2900.0
     assert merge_summaries([quiet, quiet])["misses_working_cpu_p50_us"] == 0.0
+
+
+def test_the_operator_latency_is_split_by_the_publisher_of_each_command():
+    period, frames = 0.002, []
+    for k in range(500):
+        tick = 0.001 + k * period
+        sign = 1.0 if (tick // 0.01) % 2 == 0 else -1.0                             # operator flips every 10 ms
+        for node in range(3):
+            frames.append(_frame(tick - 0.0007, node, CommandId.GET_ENCODER_ESTIMATES))
+            frames.append(_frame(tick + 0.0001 + 1e-5 * node, node, CommandId.SET_INPUT_TORQUE,
+                                 struct.pack("<ff", sign, 0.0)[:4]))
+    # commands in pairs, one of each sign, by turns on Zenoh's default QoS (sent 3 ms before the flip) and on the
+    # stream's (1 ms before it); the next burst is 1.1 ms after the flip
+    operator = []
+    for j in range(1, 100):
+        label = "default" if (j - 1) // 2 % 2 == 0 else "streams"
+        operator.append((j * 0.01 - (0.003 if label == "default" else 0.001), 1.0 if j % 2 == 0 else -1.0, label))
+    latency = analyse(frames, operator, (0.0, 1.0), 500.0, {})["latency"]
+    assert latency["operator_to_torque_by_qos_us"]["default"]["p50"] == pytest.approx(3000.0 + 1100.0, abs=1.0)
+    assert latency["operator_to_torque_by_qos_us"]["streams"]["p50"] == pytest.approx(1000.0 + 1100.0, abs=1.0)
+    assert latency["operator_to_torque_by_qos_us"]["default"]["n"] + \
+        latency["operator_to_torque_by_qos_us"]["streams"]["n"] == latency["operator_to_torque_us"]["n"]

@@ -7,6 +7,11 @@
     loop_free_running.{…}                              500 Hz with --no-sensor-sync (the default locks ticks to
                                                        the estimates)
     latency.{sensor_to_torque_us,operator_to_torque_us,zenoh_floor_us,can_floor_us}.{p50,p99}
+    latency.operator_to_torque_by_qos_us.{default,streams}.{p50,p99}
+                                                       the same, split by the publisher of each command: the
+                                                       bench operator's pairs of commands go alternately with
+                                                       Zenoh's default QoS and with the operator stream's
+                                                       (REAL_TIME, BLOCK, express: services/zenoh_qos.py)
     batched_sim.{robots,steps_per_s,scalar_steps_per_s,speedup_vs_scalar}   (batched.py)
     bus_load.fraction_1mbit                            frames seen on the bus, worst-case stuffing
     cpu.fraction_of_one_core                           robot + controller at 500 Hz
@@ -126,7 +131,7 @@ def collect(quick: bool, skip_stack: bool = False, progress=print) -> dict:
         seconds, seconds_1k = (15.0, 8.0) if quick else (60.0, 20.0)
         turns = QUICK_TURNS if quick else TURNS
         progress(f"stack at 500 Hz for {seconds:g} s: {turns} controllers in turn with the bare loop on the same bus …")
-        run500 = _stack_run(500.0, seconds, progress=progress, turns=turns, floor=True)
+        run500 = _stack_run(500.0, seconds, progress=progress, turns=turns, floor=True, compare_qos=True)
         report["machine_floor"] = run500.get("machine_floor")
         progress(f"stack at 1 kHz for {seconds_1k:g} s …")
         run1k = _stack_run(1000.0, seconds_1k, probes=False, progress=progress)

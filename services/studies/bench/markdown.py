@@ -86,6 +86,10 @@ def render(report: dict) -> str:
                f"{_fmt(lookup(report, 'latency.operator_to_torque_us.p99'))} | | "
                f"{_fmt(lookup(report, f'{third}.operator_to_torque_us.p50'))} / "
                f"{_fmt(lookup(report, f'{third}.operator_to_torque_us.p99'))} |")
+    for name, what in (("default", "Zenoh's default QoS"), ("streams", "the operator stream's QoS")):
+        out.append(f"| operator → torque p50 / p99 µs, {what} | "
+                   f"{_fmt(lookup(report, f'latency.operator_to_torque_by_qos_us.{name}.p50'))} / "
+                   f"{_fmt(lookup(report, f'latency.operator_to_torque_by_qos_us.{name}.p99'))} | | |")
     for key in ("zenoh_floor_us", "can_floor_us"):
         out.append(f"| {key.removesuffix('_us').replace('_', ' ')} p50 / p99 µs | "
                    f"{_fmt(lookup(report, f'latency.{key}.p50'))} / {_fmt(lookup(report, f'latency.{key}.p99'))} | | |")

@@ -24,7 +24,11 @@ off for the run (its operator must not pause).
   used before it reported the send time, also counts the telemetry after the send: it cut off
   frames the tick had used and charged it the previous period's.)
 * operator → torque: the operator's y deflection alternates sign every command; the latency of a
-  command is from its send time to the first torque burst whose sign follows it.
+  command is from its send time to the first torque burst whose sign follows it. With `compare_qos`,
+  the operator sends its commands in pairs (one of each sign) alternately on two publishers of the
+  same key: one with Zenoh's default QoS, one with the operator stream's own (services/zenoh_qos.py:
+  REAL_TIME, BLOCK, express); `latency.operator_to_torque_by_qos_us` holds each one's figures, from
+  the same controllers in the same minutes.
 * the drives' send jitter: |Δt − T| between the simulated drives' bursts of encoder estimates (500 Hz),
   the other side of sensor → torque.
 * bus load: every frame seen on the bus in the window, worst-case stuffed (bus_load.py).
@@ -49,7 +53,7 @@ from sharedctl.protocol.messages import ControlRequest, OperatorCommand
 from sharedctl.protocol.msgpack_codec import encode_message
 from sharedctl.protocol.odrive_enums import CommandId
 
-from sharedctl.services import can_bus, children, zenoh_session
+from sharedctl.services import can_bus, children, zenoh_qos, zenoh_session
 from sharedctl.services.summary_output import read_json
 from .bus_load import bus_load
 from .hop_probe import PROBE_CAN_ID, PROBE_KEY, unpack_time
@@ -135,9 +139,12 @@ def cpu_plan() -> dict:
 
 @dataclass
 class Operator:
-    """The bench's operator: a command every 1/OPERATOR_RATE s, its y deflection flipping sign each time."""
+    """The bench's operator: a command every 1/OPERATOR_RATE s, its y deflection flipping sign each time. With a
+    `default_publisher` (Zenoh's default QoS on the same key) the commands go in pairs, one of each sign, on it and
+    on `publisher` by turns; `log` holds (send time, sign, "default" | "streams")."""
 
     publisher: object
+    default_publisher: object | None = None
     session_id: str = field(default_factory=lambda: os.urandom(8).hex())
     log: list = field(default_factory=list)
     seq: int = 0
@@ -150,8 +157,9 @@ class Operator:
             self.seq += 1
             self.sign = -self.sign
             cmd = _command(self.seq, self.session_id, self.sign)
-            self.publisher.put(encode_message(cmd))
-            self.log.append((cmd.send_time, self.sign))
+            default = self.default_publisher is not None and (self.seq - 1) // 2 % 2 == 0
+            (self.default_publisher if default else self.publisher).put(encode_message(cmd))
+            self.log.append((cmd.send_time, self.sign, "default" if default else "streams"))
             if on_each is not None:
                 on_each()
             self.next_at = max(self.next_at + 1.0 / OPERATOR_RATE, time.monotonic() - 1.0 / OPERATOR_RATE)
@@ -159,7 +167,8 @@ class Operator:
 
 
 def run(rate_hz: float, seconds: float, log_dir: Path | None = None, probes: bool = True,
-        controller_args: tuple[str, ...] = (), pin: bool = True, turns: int = 1, floor: bool = False) -> dict:
+        controller_args: tuple[str, ...] = (), pin: bool = True, turns: int = 1, floor: bool = False,
+        compare_qos: bool = False) -> dict:
     """`_run` with this process's cyclic garbage collector off (as `timeit` does): the listener's list of
     frames grows to hundreds of thousands of objects, over which a full collection held the GIL for
     40–95 ms — the bench's operator sent nothing meanwhile and then a burst. Frames hold no cycles;
@@ -168,14 +177,14 @@ def run(rate_hz: float, seconds: float, log_dir: Path | None = None, probes: boo
     gc.collect()
     gc.disable()
     try:
-        return _run(rate_hz, seconds, log_dir, probes, controller_args, pin, turns, floor)
+        return _run(rate_hz, seconds, log_dir, probes, controller_args, pin, turns, floor, compare_qos)
     finally:
         if enabled:
             gc.enable()
 
 
 def _run(rate_hz: float, seconds: float, log_dir: Path | None, probes: bool, controller_args: tuple[str, ...],
-         pin: bool, turns: int, floor: bool) -> dict:
+         pin: bool, turns: int, floor: bool, compare_qos: bool = False) -> dict:
     """Start the stack at `rate_hz` for `seconds` of measurement; returns the figures (see module doc).
 
     `turns` > 1: the controller runs that many times, `seconds / turns` of measurement each, one after the
@@ -211,7 +220,9 @@ def _run(rate_hz: float, seconds: float, log_dir: Path | None, probes: bool, con
             raise RuntimeError(f"robot did not start (log: {robot.log})")
         robot_priority = _realtime(robot.popen.pid) or robot_priority
         session = zenoh_session.open_session([z_bench], [])        # each controller connects to it
-        operator = Operator(session.declare_publisher(keys.operator_cmd_key(ROBOT_ID)))
+        key = keys.operator_cmd_key(ROBOT_ID)
+        operator = Operator(zenoh_qos.declare_publisher(session, key),
+                            zenoh_qos.declare_publisher(session, key, zenoh_qos.DEFAULT) if compare_qos else None)
         subscriber = session.declare_subscriber(
             PROBE_KEY, lambda sample: zenoh_arrivals.append((time.time(), unpack_time(sample.payload.to_bytes()))))
         if probes:
@@ -234,7 +245,9 @@ def _run(rate_hz: float, seconds: float, log_dir: Path | None, probes: bool, con
                 floor_runs.append(_floor_turn(daemon_turns[-1]["summary"], operator, rate_hz, daemon_seconds,
                                               cpus.get("controller_loop"), can_port))
         subscriber.undeclare()
-        operator.publisher.undeclare()
+        for publisher in (operator.publisher, operator.default_publisher):
+            if publisher is not None:
+                publisher.undeclare()
     finally:
         for child in started:
             child.stop()
@@ -453,10 +466,16 @@ def analyse_turns(frames: list[Frame], operator_log, windows, rate_hz: float, su
     inside = [f for p in parts for f in p["inside"]]
     load = bus_load([(f.dlc, f.remote, f.extended) for f in inside if f.can_id != PROBE_CAN_ID], seconds)
     counts = {k: sum(p["counts"][k] for p in parts) for k in ("torque", "encoder", "all")}
+    operator = [pair for p in parts for pair in p["operator"]]
+    latency = {"sensor_to_torque_us": percentiles(pool("sensor"), 1e6),
+               "operator_to_torque_us": percentiles([lat for _, lat in operator], 1e6)}
+    labels = sorted({label for label, _ in operator if label is not None})
+    if labels:
+        latency["operator_to_torque_by_qos_us"] = {
+            label: percentiles([lat for lab, lat in operator if lab == label], 1e6) for label in labels}
     return {
         "loop": loop,
-        "latency": {"sensor_to_torque_us": percentiles(pool("sensor"), 1e6),
-                    "operator_to_torque_us": percentiles(pool("operator"), 1e6)},
+        "latency": latency,
         "bus_load": {"fraction_1mbit": load, "frames_per_s": {k: v / seconds for k, v in counts.items()}},
     }
 
@@ -476,7 +495,7 @@ def _window(frames: list[Frame], operator_log, window, period: float, summary: d
     # only its whole compute time (which includes the telemetry after the send)
     before_send = (summary.get("torque_out_p50_us") or summary.get("compute_p50_us", 0.0)) if summary else 0.0
     compute = before_send * 1e-6
-    operator = [(t, s) for t, s in operator_log if lo <= t <= hi]
+    operator = [entry for entry in operator_log if lo <= entry[0] <= hi]
     return {
         "bursts": bursts, "span": bursts[-1] - bursts[0] if len(bursts) > 1 else 0.0,
         "jitter": period_jitter(bursts, period), "missed_bus": missed_periods(bursts, period),
@@ -507,17 +526,20 @@ def _sensor_ages(bursts: list[float], encoder: list[Frame], compute: float) -> l
     return ages
 
 
-def _operator_latencies(first_frames: list[Frame], torque: list[Frame], operator_log, period: float) -> list[float]:
+def _operator_latencies(first_frames: list[Frame], torque: list[Frame], operator_log,
+                        period: float) -> list[tuple[str | None, float]]:
     """Send time of each command → the first torque burst after it whose wheel-0 torque has the command's sign
-    (the sign convention learnt from the run: the majority of sign(τ₀)·sign(command) over the bursts)."""
+    (the sign convention learnt from the run: the majority of sign(τ₀)·sign(command) over the bursts), with the
+    command's QoS label (its log entry's third field; None without one)."""
     wheel0 = ([(f.t, struct.unpack("<f", f.data[:4])[0]) for f in torque if (f.can_id >> 5) == (torque[0].can_id >> 5)]
               if torque else [])
     if not wheel0 or not operator_log:
         return []
     times = np.array([t for t, _ in wheel0])
     signs = np.sign([tau for _, tau in wheel0])
-    sent = np.array([t for t, _ in operator_log])
-    wanted = np.array([s for _, s in operator_log])
+    sent = np.array([entry[0] for entry in operator_log])
+    wanted = np.array([entry[1] for entry in operator_log])
+    labels = [entry[2] if len(entry) > 2 else None for entry in operator_log]
     # which command was current at each burst (the last one sent before it), for the sign convention
     current = np.searchsorted(sent, times) - 1
     valid = (current >= 0) & (signs != 0)
@@ -529,6 +551,6 @@ def _operator_latencies(first_frames: list[Frame], torque: list[Frame], operator
         lo, hi = np.searchsorted(times, sent[k]), np.searchsorted(times, sent[k + 1])
         for j in range(lo, hi):
             if signs[j] * convention == wanted[k]:
-                out.append(times[j] - sent[k])
+                out.append((labels[k], times[j] - sent[k]))
                 break
     return out
