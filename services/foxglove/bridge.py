@@ -108,7 +108,10 @@ class LiveView:
         return [(topic, kind, MESSAGE_SCHEMAS[kind]) for topic, kind in fixed] + self.views.channels()
 
     def convert(self, key: str, payload: bytes, log_ns: int, publish_ns: int | None = None) -> list[JsonRecord]:
+        """The sample's record, then its derived records."""
         record = wire_record(key, payload, log_ns, publish_ns)
-        if record.message is None:
-            return [record]
-        return [record, *self.views(record)]
+        return [record, *self.derive(record)]
+
+    def derive(self, record: JsonRecord) -> list[JsonRecord]:
+        """The derived records of a sample's record (none for an undecoded payload)."""
+        return [] if record.message is None else self.views(record)

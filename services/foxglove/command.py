@@ -30,7 +30,7 @@ from sharedctl.scenario import ScenarioError
 
 from .. import zenoh_session
 from ..lifecycle import StopFlag
-from ..recording.json_form import JsonRecord, zenoh_time_ns
+from ..recording.json_form import JsonRecord, wire_record, zenoh_time_ns
 from ..recording.json_schemas import MESSAGE_ENCODING, SCHEMA_ENCODING, UNDECODED_TOPIC, schema_bytes
 from ..scenario_files import load
 from ..summary_output import write_json
@@ -120,11 +120,13 @@ class Publisher:
             self.publish(*item)
 
     def publish(self, key: str, payload: bytes, log_ns: int, publish_ns: int | None) -> None:
+        """The sample as recorded, then what is derived from it; a failure of either is counted and said once."""
+        record = wire_record(key, payload, log_ns, publish_ns)
         try:
-            records = self.view.convert(key, payload, log_ns, publish_ns)
-            for record in records:
-                self._log(record)
-        except Exception as exc:  # noqa: BLE001 — a record that cannot be made must not stop the view
+            self._log(record)
+            for derived in self.view.derive(record):
+                self._log(derived)
+        except Exception as exc:  # noqa: BLE001 — a record that cannot be made or served must not stop the view
             self.counts.errors += 1
             self.counts.first_error = self.counts.first_error or f"{key}: {type(exc).__name__}: {exc}"
             self._say_once("error", f"cannot serve a message on {key}: {type(exc).__name__}: {exc} "
