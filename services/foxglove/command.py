@@ -32,11 +32,11 @@ from .. import zenoh_session
 from ..lifecycle import StopFlag
 from ..recording.json_form import JsonRecord, wire_record, zenoh_time_ns
 from ..recording.json_schemas import MESSAGE_ENCODING, SCHEMA_ENCODING, UNDECODED_TOPIC, schema_bytes
-from ..scenario_files import load
+from ..recording.scene import DEFAULT_HALF_WIDTH
+from ..recording.views import views_for
 from ..summary_output import write_json
 from .address import listen_address
-from .bridge import DerivedViews, LiveView
-from .scene import DEFAULT_HALF_WIDTH
+from .bridge import LiveView
 
 PROG = "sharedctl foxglove"
 DEFAULT_LISTEN = "127.0.0.1:8765"
@@ -155,15 +155,6 @@ class Publisher:
             print(f"{PROG}: {text}", file=sys.stderr, flush=True)
 
 
-def robot_radius(model) -> float:
-    """The drawn robot's radius: wheel distance plus wheel radius for the omnidirectional robot, else 0.1 m."""
-    parameters = getattr(model, "parameters", None)
-    try:
-        return float(parameters.wheel_distance + parameters.wheel_radius)
-    except AttributeError:
-        return 0.1
-
-
 def run(args) -> int:
     stop = StopFlag().install()
     try:
@@ -176,11 +167,10 @@ def run(args) -> int:
             raise ValueError("--view-half-width must be positive")
         if args.duration is not None and not args.duration > 0:
             raise ValueError("--duration must be positive")
-        loop, _, _ = load(args.scenario).closed_loop(None)
+        view = LiveView(views_for(args.robot_id, args.scenario, args.view_half_width))
     except (ValueError, ScenarioError) as exc:
         print(f"{PROG}: {exc}", file=sys.stderr)
         return 2
-    view = LiveView(DerivedViews(args.robot_id, loop.feasible, args.view_half_width, robot_radius(loop.model)))
     context = foxglove.Context()
     try:
         server = foxglove.start_server(name=f"sharedctl {args.robot_id}", host=host, port=port, context=context)

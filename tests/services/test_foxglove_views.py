@@ -13,10 +13,11 @@ from sharedctl.protocol import messages as m
 from sharedctl.protocol.msgpack_codec import encode_message
 from sharedctl.services import cli
 from sharedctl.services.foxglove.address import AddressError, listen_address
-from sharedctl.services.foxglove.bridge import DerivedViews, LiveView, log_of
+from sharedctl.services.foxglove.bridge import LiveView
 from sharedctl.services.foxglove.command import Publisher
-from sharedctl.services.foxglove.scene import region_slice, scene_update
-from sharedctl.services.foxglove.wellknown import pose, time_of_ns
+from sharedctl.services.recording.foxglove_types import pose, time_of_ns
+from sharedctl.services.recording.scene import region_slice, scene_update
+from sharedctl.services.recording.views import DerivedViews, log_of
 from sharedctl.services.scenario_files import load
 
 HALF_PI = math.pi / 2

@@ -18,7 +18,7 @@ import numpy as np
 
 from sharedctl.constraints import FeasibleSet, Polytope
 
-from .wellknown import LINE_LIST, color, entity, point, pose
+from .foxglove_types import LINE_LIST, color, entity, point, pose
 
 FRAME = "world"
 WINDOW_EDGE = -1                # the label of a polygon edge that lies on the window, not on a face
