@@ -1,6 +1,6 @@
 """`sharedctl foxglove --connect EP [--connect EP …] [--zenoh-listen EP …] [--listen HOST:PORT] [--scenario S]
-[--robot-id ID] [--allow-remote] [--duration S] [--json OUT]` — the live view: a Foxglove WebSocket server
-fed from Zenoh.
+[--robot-id ID] [--allow-remote] [--duration S] [--json OUT] [--write-layout FILE]` — the live view: a Foxglove
+WebSocket server fed from Zenoh.
 
 Subscribes to ``sharedctl/v1/<robot>/**`` on every endpoint it connects to (Zenoh peers do not
 forward for each other: connect to each publisher whose data you want, or have it connect to
@@ -22,6 +22,7 @@ import sys
 import threading
 import time
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import foxglove
 
@@ -37,6 +38,7 @@ from ..recording.views import views_for
 from ..summary_output import write_json
 from .address import listen_address
 from .bridge import LiveView
+from .layout import layout_json
 
 PROG = "sharedctl foxglove"
 DEFAULT_LISTEN = "127.0.0.1:8765"
@@ -63,6 +65,9 @@ def add_parser(subparsers) -> None:
                         f"(default {DEFAULT_HALF_WIDTH} m)")
     p.add_argument("--duration", type=float, metavar="S", help="stop after S seconds (default: until SIGINT/SIGTERM)")
     p.add_argument("--json", metavar="OUT", help="at exit, write what was served (messages per topic, counts) as JSON")
+    p.add_argument("--write-layout", metavar="FILE",
+                   help="write the Foxglove layout for --robot-id's channels to FILE and exit "
+                        "(deploy/foxglove/sharedctl-layout.json is robot1's)")
     p.set_defaults(handler=run)
 
 
@@ -155,7 +160,20 @@ class Publisher:
             print(f"{PROG}: {text}", file=sys.stderr, flush=True)
 
 
+def write_layout(path: str, robot: str) -> int:
+    try:
+        keys.check_robot_id(robot)
+        Path(path).write_text(layout_json(robot), encoding="utf-8")
+    except (ValueError, OSError) as exc:
+        print(f"{PROG}: {exc}", file=sys.stderr)
+        return 2
+    print(f"{PROG}: layout for {robot} written to {path}")
+    return 0
+
+
 def run(args) -> int:
+    if args.write_layout:
+        return write_layout(args.write_layout, args.robot_id)
     stop = StopFlag().install()
     try:
         host, port = listen_address(args.listen, args.allow_remote)

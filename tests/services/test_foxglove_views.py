@@ -198,3 +198,41 @@ def test_malformed_addresses_are_refused(text):
 def test_the_demo_refuses_a_live_view_on_another_host(capsys):
     assert cli.main(["demo", "--foxglove", "0.0.0.0:8765"]) == 2
     assert "--foxglove '0.0.0.0:8765': not a loopback address" in capsys.readouterr().err
+
+
+# ----- the layout --------------------------------------------------------------------------
+def test_the_layout_in_deploy_is_the_one_the_command_writes(tmp_path):
+    from pathlib import Path
+
+    from sharedctl.services.foxglove.layout import layout_json
+
+    shipped = Path(__file__).resolve().parents[2] / "deploy" / "foxglove" / "sharedctl-layout.json"
+    assert shipped.read_text() == layout_json(ROBOT)
+    assert cli.main(["foxglove", "--write-layout", str(tmp_path / "l.json"), "--robot-id", "robot7"]) == 0
+    assert "sharedctl/v1/robot7/state" in (tmp_path / "l.json").read_text()
+
+
+def test_every_topic_the_layout_shows_is_a_channel_the_live_view_serves():
+    from sharedctl.services.foxglove.layout import layout_json
+
+    panels, topics = [], set()
+
+    def walk(node):
+        if isinstance(node, dict):
+            if node.get("type") == "panel":
+                panels.append(node["panelType"])
+            for key, value in node.items():
+                if key in ("value", "topicPath", "topicToRender") and isinstance(value, str):
+                    topics.add(value.split(".")[0])
+                elif key == "topics":
+                    topics.update(value)
+                walk(value)
+        elif isinstance(node, list):
+            for item in node:
+                walk(item)
+
+    walk(json.loads(layout_json(ROBOT)))
+    served = {topic for topic, _, _ in LiveView(DerivedViews(ROBOT)).known_channels()}
+    assert topics and topics <= served, topics - served
+    assert {"ThreeDee", "Plot", "StateTransitions", "Log", "RawMessages"} <= set(panels)
+    assert f"sharedctl/view/{ROBOT}/scene" in topics and f"sharedctl/view/{ROBOT}/log" in topics
