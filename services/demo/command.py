@@ -1,5 +1,5 @@
 """`sharedctl demo [--scenario FILE|name] [--controller ce|nce|of] [--duration S] [--headless] [--json OUT]
-[--zenoh-listen ENDPOINT]` — the whole system on this host, measured on the ground truth.
+[--zenoh-listen ENDPOINT] [--foxglove HOST:PORT]` — the whole system on this host, measured on the ground truth.
 
 Starts `sharedctl robot`, `sharedctl controller` and `sharedctl console --script SCENARIO` as
 child processes (headless, or the live dashboard when a terminal is attached), lets the
@@ -22,6 +22,7 @@ connects to the controller, whose telemetry it needs):
     controller  listens  tcp/127.0.0.1:C      (--zenoh-listen; RobotState, Events, OperatorCommand)
     console     connects to C
     demo        connects to R and C
+    foxglove    (--foxglove) connects to R and C, listens on tcp/127.0.0.1:F; the console also connects to F
     CAN         python-can udp_multicast, host-local (hop_limit=0), a free port per run
 
 The run's clock: t = 0 is the instant the controller granted the operator the lease, as it
