@@ -174,7 +174,6 @@ def write_layout(path: str, robot: str) -> int:
 def run(args) -> int:
     if args.write_layout:
         return write_layout(args.write_layout, args.robot_id)
-    stop = StopFlag().install()
     try:
         host, port = listen_address(args.listen, args.allow_remote)
         if not args.connect and not args.zenoh_listen:
@@ -189,6 +188,7 @@ def run(args) -> int:
     except (ValueError, ScenarioError) as exc:
         print(f"{PROG}: {exc}", file=sys.stderr)
         return 2
+    stop = StopFlag().install()
     context = foxglove.Context()
     try:
         server = foxglove.start_server(name=f"sharedctl {args.robot_id}", host=host, port=port, context=context)

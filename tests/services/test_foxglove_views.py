@@ -236,3 +236,10 @@ def test_every_topic_the_layout_shows_is_a_channel_the_live_view_serves():
     assert topics and topics <= served, topics - served
     assert {"ThreeDee", "Plot", "StateTransitions", "Log", "RawMessages"} <= set(panels)
     assert f"sharedctl/view/{ROBOT}/scene" in topics and f"sharedctl/view/{ROBOT}/log" in topics
+
+
+def test_the_command_refuses_another_host_without_allow_remote_before_serving(capsys):
+    assert cli.main(["foxglove", "--connect", "tcp/127.0.0.1:7447", "--listen", "0.0.0.0:8765"]) == 2
+    assert "not a loopback address" in capsys.readouterr().err
+    assert cli.main(["foxglove", "--listen", "127.0.0.1:8765"]) == 2          # no Zenoh endpoint at all
+    assert cli.main(["foxglove", "--connect", "tcp/192.168.1.2:7447"]) == 2    # Zenoh stays on loopback too
