@@ -39,7 +39,7 @@ LOG, SCENE = f"sharedctl/view/{ROBOT}/log", f"sharedctl/view/{ROBOT}/scene"
 CONVEX_SET = (-1.0, 0.5, 4.0)
 
 
-async def _watch(port: int, timeout: float) -> dict:
+async def _watch(port: int, timeout: float, running) -> dict:
     """Everything a Foxglove client hears from the server until it closes (or `timeout` passes)."""
     deadline = time.monotonic() + timeout
     while True:                                   # the server comes up once the demo has started it
@@ -48,7 +48,7 @@ async def _watch(port: int, timeout: float) -> dict:
                                open_timeout=2)
             break
         except (OSError, asyncio.TimeoutError):
-            if time.monotonic() > deadline:
+            if time.monotonic() > deadline or not running():
                 raise
             await asyncio.sleep(0.1)
     heard = {"subprotocol": ws.subprotocol, "server_info": None, "channels": {}, "messages": {}, "stray": 0}
@@ -96,7 +96,7 @@ def live(tmp_path_factory):
              *FEEDBACK_TIMEOUT],
             stdin=subprocess.DEVNULL, stdout=log, stderr=subprocess.STDOUT)
     try:
-        heard = asyncio.run(_watch(port, timeout=60.0))
+        heard = asyncio.run(_watch(port, 60.0, lambda: demo.poll() is None))
         demo.wait(timeout=30)
     finally:
         reap([demo])
