@@ -38,6 +38,7 @@ COMMANDS = {
     "record-recover": "sharedctl.services.recording.recover_command",
     "replay": "sharedctl.services.recording.replay_command",
     "plot": "sharedctl.services.studies.plot.command",
+    "foxglove": "sharedctl.services.foxglove.command",
 }
 
 
@@ -48,6 +49,7 @@ EXTRAS = {
     "dask": "montecarlo",
     "distributed": "montecarlo",
     "scipy": "montecarlo",
+    "foxglove": "foxglove",
 }
 
 # Options whose study imports an extra's module only when it gets there (at the end of a long

@@ -33,7 +33,8 @@ def without(monkeypatch):
     """Make `import NAME` fail for the given modules, and forget every study module imported so far."""
     def block(*names):
         for key in list(sys.modules):
-            if key.split(".")[0] in names or key.startswith(("sharedctl.services.studies", "sharedctl.baselines")):
+            if key.split(".")[0] in names or key.startswith(("sharedctl.services.studies", "sharedctl.baselines",
+                                                             "sharedctl.services.foxglove")):
                 monkeypatch.delitem(sys.modules, key)
         for name in names:
             monkeypatch.setitem(sys.modules, name, None)
@@ -44,6 +45,7 @@ def without(monkeypatch):
     (["plot", "--out", "figure.png", "run.json"], "matplotlib"),
     (["plot", "--help"], "matplotlib"),
     (["compare", "--quick"], "quadprog"),
+    (["foxglove", "--connect", "tcp/127.0.0.1:7447"], "foxglove"),
 ])
 def test_a_command_whose_module_needs_a_missing_extra_exits_2_naming_the_extra(without, capsys, argv, module):
     without(module)
@@ -63,6 +65,12 @@ def test_an_option_that_needs_a_missing_extra_is_refused_before_the_run(without,
     out = capsys.readouterr()
     assert out.err == expected("sim", "matplotlib")
     assert out.out == ""                      # the simulation's summary table was never printed
+
+
+def test_a_demo_with_a_live_view_needs_the_foxglove_extra(without, capsys):
+    without("foxglove")
+    assert cli.main(["demo", "--foxglove", "127.0.0.1:8765"]) == 2
+    assert "needs foxglove-sdk, which comes with the 'foxglove' extra" in capsys.readouterr().err
 
 
 def test_help_still_lists_every_command_when_the_extras_are_missing(without, capsys):

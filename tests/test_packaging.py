@@ -101,6 +101,9 @@ def test_every_dependency_in_pyproject_says_why_on_its_line():
     assert all(re.search(r'",\s+# \S', line) for line in lines), [line for line in lines if "#" not in line]
 
 
+# Processes that exist for an extra's sake: without it they stop with the message naming the extra.
+PROCESS_EXTRAS = {"foxglove": "foxglove"}      # sharedctl foxglove, the live view (foxglove-sdk)
+
 # The processes' command modules: everything outside services/studies/ (a study may import a process,
 # never the reverse), found in the command table.
 PROBE = """
@@ -109,7 +112,7 @@ blocked = json.loads(sys.argv[1])
 for name in blocked:
     sys.modules[name] = None      # `import name` now raises ModuleNotFoundError
 from sharedctl.services import cli
-failed = {}
+failed, extras = {}, {}
 for command, module in cli.COMMANDS.items():
     if module.startswith("sharedctl.services.studies."):
         continue
@@ -118,9 +121,14 @@ for command, module in cli.COMMANDS.items():
         parser = cli.build_parser(command)
         if command in parser.unavailable:
             failed[command] = parser.unavailable[command]
+    except ModuleNotFoundError as exc:
+        if cli.missing_extra(exc):
+            extras[command] = cli.missing_extra(exc)
+        else:
+            failed[command] = repr(exc)
     except ImportError as exc:
         failed[command] = repr(exc)
-print(json.dumps(failed))
+print(json.dumps({"failed": failed, "extras": extras}))
 """
 
 
@@ -133,4 +141,6 @@ def test_the_processes_import_nothing_that_only_the_test_lock_installs():
     assert {"matplotlib", "quadprog", "pytest", "scipy", "yaml"} <= set(blocked)
     out = subprocess.run([sys.executable, "-c", PROBE, json.dumps(blocked)], capture_output=True, text=True,
                          timeout=120, check=True).stdout
-    assert json.loads(out) == {}
+    probed = json.loads(out)
+    assert probed["failed"] == {}
+    assert probed["extras"] == PROCESS_EXTRAS     # a process that is an extra's whole purpose, and only those

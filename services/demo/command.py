@@ -1,5 +1,5 @@
 """`sharedctl demo [--scenario FILE|name] [--controller ce|nce|of] [--duration S] [--headless] [--json OUT]
-[--zenoh-listen ENDPOINT]` — the whole system on this host, measured on the ground truth.
+[--zenoh-listen ENDPOINT] [--foxglove HOST:PORT]` — the whole system on this host, measured on the ground truth.
 
 Starts `sharedctl robot`, `sharedctl controller` and `sharedctl console --script SCENARIO` as
 child processes (headless, or the live dashboard when a terminal is attached), lets the
@@ -22,6 +22,7 @@ connects to the controller, whose telemetry it needs):
     controller  listens  tcp/127.0.0.1:C      (--zenoh-listen; RobotState, Events, OperatorCommand)
     console     connects to C
     demo        connects to R and C
+    foxglove    (--foxglove) connects to R and C, listens on tcp/127.0.0.1:F; the console also connects to F
     CAN         python-can udp_multicast, host-local (hop_limit=0), a free port per run
 
 The run's clock: t = 0 is the instant the controller granted the operator the lease, as it
@@ -34,6 +35,7 @@ emergency stop (measure.states_at), for the fault campaign's forecasts.
 """
 from __future__ import annotations
 
+import importlib.util
 import shutil
 import sys
 import tempfile
@@ -46,6 +48,7 @@ from sharedctl.services import can_bus
 
 from sharedctl.services.children import (Child, free_udp_port, raise_priority, start_child, udp_receive_buffer_errors,
                                          wait_listening)
+from sharedctl.services.foxglove.address import listen_address
 from sharedctl.services.faults.stack import ESTOP_OPERATOR, FaultStack, add_arguments as add_fault_arguments
 from sharedctl.services.security.secure_stack import OPERATOR, SecureStack, add_arguments as add_secure_arguments
 from sharedctl.services.recording.launch import add_argument as add_record_argument, open_demo_recording
@@ -78,6 +81,9 @@ def add_parser(subparsers) -> None:
     p.add_argument("--no-reference", action="store_true", help="skip the in-process sampled reference run")
     p.add_argument("--log-dir", metavar="DIR",
                    help="keep the children's output here (default: a temporary directory, removed on success)")
+    p.add_argument("--foxglove", metavar="HOST:PORT",
+                   help="serve a live view to Foxglove on this loopback WebSocket address (`sharedctl foxglove` as a "
+                        "child; needs the 'foxglove' extra; docs/foxglove.md)")
     can_bus.add_arguments(p, "host-local udp_multicast on a free port of its own, so that demos never share a bus; "
                              "give the robot's and the controller's bus to join it from outside")
     add_fault_arguments(p)
@@ -118,6 +124,7 @@ def run(args) -> int:
         keys.check_robot_id(args.robot_id)
         can, faults.bus = bus_arguments(args, faults)
         faults.router = secure if secure.enabled else None
+        viewer = _check_foxglove(args.foxglove, secure.enabled)
     except (ScenarioError, EndpointError, ValueError) as exc:
         print(f"sharedctl demo: {exc}", file=sys.stderr)
         return 2
@@ -161,11 +168,19 @@ def run(args) -> int:
         if not secure.wait_up("robot", args.robot_id, children["robot"], STARTUP_TIMEOUT,
                               lambda: wait_listening(robot_ep, children["robot"], STARTUP_TIMEOUT)):
             raise RuntimeError(f"robot did not come up on {robot_ep}")
+        if viewer is not None:   # the live view: connected to the robot and the controller, the console to it
+            children["foxglove"] = start_child("foxglove", [
+                "foxglove", "--connect", robot_ep, "--connect", controller_ep, "--zenoh-listen", viewer,
+                "--listen", args.foxglove, "--scenario", scenario_arg, *common, "--duration", backstop,
+                *_json("foxglove", log_dir)], log_dir)
+            if not wait_listening(viewer, children["foxglove"], STARTUP_TIMEOUT):
+                raise RuntimeError(f"the Foxglove live view did not come up on {args.foxglove}")
         # the console before the controller: its start-up (imports, a CPU burst) is over before the
         # controller runs its feedback timeout; it connects when the controller listens (Zenoh retries)
         console_argv = ["console", "--script", scenario_arg,
                         *secure.zenoh_args("operator", ["--zenoh-connect", console_ep]), *common]
         console_argv += ["--zenoh-connect", recording.endpoint] if recording is not None and not secure.enabled else []
+        console_argv += ["--zenoh-connect", viewer] if viewer is not None else []
         console_argv += [] if secure.enabled else faults.console_listener(free_loopback_port, open_session)
         children["console"] = start_child("console", console_argv + ([] if interactive else ["--headless"]), log_dir,
                                           interactive=interactive)
@@ -216,7 +231,7 @@ def run(args) -> int:
             controller = children.get("controller")
             if controller is not None and controller.popen.poll() is None:
                 settle = rec.wait_at_rest(SETTLE_SPEED, SETTLE_TIMEOUT)
-        for name in ("controller", "robot"):
+        for name in ("controller", "robot", "foxglove"):
             if name in children:
                 children[name].stop()
         faults.stop()
@@ -233,8 +248,9 @@ def run(args) -> int:
                "interrupted": stop.stopped, "failure": failure, "settle_seconds": settle,
                "robot_priority": robot_priority,
                "processes": {name: _process_report(children[name], log_dir)
-                             for name in ("console", "controller", "robot") if name in children},
-               "endpoints": {"robot": robot_ep, "controller": controller_ep, "can": " ".join(can[1:])},
+                             for name in ("console", "controller", "robot", "foxglove") if name in children},
+               "endpoints": {"robot": robot_ep, "controller": controller_ep, "can": " ".join(can[1:]),
+                             **({"foxglove": args.foxglove} if viewer is not None else {})},
                "wall_seconds": time.monotonic() - start, **secure.summary(rec)}
     if recording is not None:
         summary["recording"] = recording_summary
@@ -249,7 +265,8 @@ def run(args) -> int:
             summary["deviation"] = deviation(result, summary["reference"])
             summary["deviation_plant"] = deviation(result, summary["reference_plant"])
             summary["tolerance"] = TOLERANCE
-    clean = all(c.clean for c in children.values()) and len(children) == 3 and secure.clean
+    clean = (all(c.clean for c in children.values()) and {"console", "controller", "robot"} <= children.keys()
+             and secure.clean)
     summary["ok"] = bool(failure is None and clean and result["violations"] == 0 and result["truth_samples"] > 0
                          and result["estops"] == 0)   # an estop means the scenario did not run
     if not faults.empty:   # intended faults: judged as services/faults/stack.py says
@@ -275,6 +292,21 @@ def _fault_instants(injected: dict, plan, result: dict) -> list[tuple[str, float
     estops = [e for e in result.get("event_log", []) if e["kind"] == "estop" and e.get("at") is not None]
     out += [("estop", e["at"]) for e in estops[:MAX_ESTOP_STATES]]
     return out
+
+
+def _check_foxglove(address: str | None, secure: bool) -> str | None:
+    """None without ``--foxglove``; else the Zenoh endpoint the live view listens on (the console connects to it:
+    peers do not forward its commands). Refused: a non-loopback address, ``--secure``, no 'foxglove' extra."""
+    if address is None:
+        return None
+    listen_address(address, option="--foxglove")
+    if secure:
+        raise ValueError("--foxglove does not join a --secure demo (its peers reach each other only through the "
+                         "router): run `sharedctl foxglove` with the router's credentials instead")
+    if importlib.util.find_spec("foxglove") is None:
+        raise ValueError("--foxglove needs foxglove-sdk, which comes with the 'foxglove' extra: "
+                         "pip install 'sharedctl[foxglove]'")
+    return f"tcp/127.0.0.1:{free_loopback_port()}"
 
 
 def _json(name: str, log_dir: Path) -> list[str]:

@@ -2,7 +2,8 @@
 
 ``--record DIR`` (demo, controller, record) creates in DIR::
 
-    <role>-<UTC time>.mcap       every message under sharedctl/v1/<robot>/** (mcap_writer)
+    <role>-<UTC time>.mcap       every message under sharedctl/v1/<robot>/** (mcap_writer), and the
+                                 derived views foxglove.Log and foxglove.SceneUpdate (views)
     <role>-<UTC time>.can.log    every CAN frame on the bus, candump -L format (can_log)
 
 The MCAP file starts with two metadata records: ``sharedctl`` (version, wire version, role,
@@ -28,6 +29,7 @@ from sharedctl.protocol.messages import WIRE_VERSION
 from .. import can_bus, zenoh_session
 from .can_log import CanLogger
 from .mcap_writer import McapRecorder
+from .views import DerivedViews, views_for
 
 METADATA_RUN = "sharedctl"
 METADATA_SCENARIO = "scenario"
@@ -76,6 +78,15 @@ def run_metadata(role: str, robot_id: str, scenario: str | None, scenario_name: 
             METADATA_SCENARIO: {"name": scenario_name or "", "source": source, "toml": toml_text}}
 
 
+def recording_views(robot_id: str, scenario: str | None) -> DerivedViews:
+    """The live view's derived channels (foxglove.Log, foxglove.SceneUpdate) for the recording; the scene
+    draws the scenario's set when the scenario loads (one that does not is only metadata)."""
+    try:
+        return views_for(robot_id, scenario)
+    except ValueError:
+        return views_for(robot_id, None)
+
+
 class FlightRecorder:
     """MCAP + CAN log of one process; ``close()`` finishes both files and returns a summary."""
 
@@ -94,7 +105,8 @@ class FlightRecorder:
         self.mcap_path = base.with_suffix(".mcap")
         self.can_log_path = base.with_suffix(".can.log") if can_spec is not None else None
         metadata = run_metadata(role, robot_id, scenario, scenario_name, seed, can_spec, extra)
-        self.mcap = McapRecorder(self.mcap_path, metadata, library=f"sharedctl {sharedctl.__version__}")
+        self.mcap = McapRecorder(self.mcap_path, metadata, library=f"sharedctl {sharedctl.__version__}",
+                                 derive=recording_views(robot_id, scenario))
         self.can_log = None
         if can_spec is not None:
             try:
@@ -140,6 +152,7 @@ class FlightRecorder:
             "undecoded": counts.undecoded,
             "dropped": counts.dropped,
             "write_error": counts.write_error,
+            "view_errors": counts.derive_errors,
             "can_frames": frames,
             "can_errors": self.can_log.errors if self.can_log is not None else None,
             "seconds": round(time.monotonic() - self.started, 3),

@@ -22,6 +22,7 @@ from sharedctl.protocol.messages import MESSAGE_TYPES
 SCHEMA_ENCODING = "jsonschema"
 MESSAGE_ENCODING = "json"
 UNDECODED_TOPIC = "sharedctl/undecoded"
+VIEW_PREFIX = "sharedctl/view"       # derived views (foxglove.Log, foxglove.SceneUpdate): topics, never Zenoh keys
 UNDECODED_SCHEMA_NAME = "sharedctl.Undecoded"
 
 UNDECODED_SCHEMA: dict[str, Any] = {

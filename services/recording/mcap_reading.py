@@ -17,7 +17,7 @@ from typing import Any, Iterator
 from mcap.records import Attachment, Channel, DataEnd, Footer, Message, Metadata, Schema
 from mcap.stream_reader import StreamReader
 
-from .json_schemas import UNDECODED_TOPIC
+from .json_schemas import UNDECODED_TOPIC, VIEW_PREFIX
 
 
 @dataclass(frozen=True)
@@ -37,6 +37,11 @@ class RecordedMessage:
     @property
     def undecoded(self) -> bool:
         return self.topic == UNDECODED_TOPIC
+
+    @property
+    def view(self) -> bool:
+        """A derived view (foxglove.Log, foxglove.SceneUpdate), not a message that crossed Zenoh."""
+        return self.topic.startswith(VIEW_PREFIX + "/")
 
 
 @dataclass

@@ -3,11 +3,13 @@
 Each received payload is queued by the Zenoh callback (nothing but a clock read and a queue
 put happens there) and written by one writer thread:
 
-* decoded with the wire codec (``decode_message``, any array lengths) and written as the JSON
-  of its MessagePack map on the channel ``<key>`` with the schema of its kind
-  (:mod:`.json_schemas`) — Foxglove reads these channels as they are;
+* decoded with the wire codec and written as the JSON of its MessagePack map on the channel
+  ``<key>`` with the schema of its kind (:mod:`.json_form`, the codec the live view shares) —
+  Foxglove reads these channels as they are;
 * a payload the codec refuses is kept byte for byte on ``sharedctl/undecoded`` with the key
-  and the error, and counted.
+  and the error, and counted;
+* with ``derive``, the records it makes of each decoded message are written too (the live
+  view's ``foxglove.Log`` and ``foxglove.SceneUpdate`` channels, docs/foxglove.md).
 
 Times: ``log_time`` is this host's clock (Unix ns) when the sample arrived; ``publish_time`` is
 the Zenoh timestamp when the sender attached one, else the message's own time field
@@ -22,36 +24,24 @@ record-recover`` rewrites it as a complete, indexed file (docs/recording.md).
 """
 from __future__ import annotations
 
-import base64
-import json
 import queue
 import threading
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
 from mcap.writer import CompressionType, Writer
 
-from sharedctl.protocol.errors import ProtocolError
-from sharedctl.protocol.msgpack_codec import decode_message, to_map
-
 from .background import lower_this_thread
-from .json_schemas import (
-    MESSAGE_ENCODING,
-    MESSAGE_SCHEMAS,
-    SCHEMA_ENCODING,
-    UNDECODED_SCHEMA,
-    UNDECODED_SCHEMA_NAME,
-    UNDECODED_TOPIC,
-    schema_bytes,
-)
+from .json_form import JsonRecord, wire_record, zenoh_time_ns
+from .json_schemas import MESSAGE_ENCODING, SCHEMA_ENCODING, schema_bytes
 
 FLUSH_PERIOD = 0.25          # s between chunk flushes: the most a SIGKILL can lose from the file
 MAX_QUEUED = 200_000         # samples waiting for the writer; beyond this they are counted as dropped
 CHUNK_SIZE = 1 << 20         # bytes; chunks are closed by time long before they reach this
 _STOP = object()
 _FLUSH = object()
-_U64 = 1 << 64
 
 
 @dataclass
@@ -63,35 +53,19 @@ class RecorderCounts:
     dropped: int = 0            # queue full or writer failed
     flushes: int = 0
     write_error: str | None = None
+    derive_errors: int = 0      # decoded messages whose derived records could not be made
+    derive_error: str | None = None   # the first such error
     per_topic: dict[str, int] = field(default_factory=dict)
-
-
-def zenoh_time_ns(timestamp) -> int | None:
-    """A Zenoh ``Timestamp`` as Unix ns, or None when the sample carries none."""
-    if timestamp is None:
-        return None
-    try:
-        return int(timestamp.get_time().timestamp() * 1e9)
-    except (AttributeError, ValueError, OverflowError, OSError):
-        return None
-
-
-def _message_time_ns(message, fallback: int) -> int:
-    seconds = getattr(message, "send_time", None)
-    if seconds is None:
-        seconds = getattr(message, "time", None)
-    if seconds is None:
-        return fallback
-    ns = int(seconds * 1e9)
-    return ns if 0 <= ns < _U64 else fallback
 
 
 class McapRecorder:
     """Records (key, payload) samples to an MCAP file from any thread; ``close()`` finishes the file."""
 
     def __init__(self, path: Path, metadata: dict[str, dict[str, str]], library: str = "sharedctl",
-                 flush_period: float = FLUSH_PERIOD) -> None:
+                 flush_period: float = FLUSH_PERIOD,
+                 derive: Callable[[JsonRecord], list[JsonRecord]] | None = None) -> None:
         self.path = Path(path)
+        self.derive = derive
         self.counts = RecorderCounts()
         self.flush_period = flush_period
         self._file = open(self.path, "wb")
@@ -190,45 +164,39 @@ class McapRecorder:
         if self.counts.write_error:
             self.counts.dropped += 1
             return
-        try:
-            message = decode_message(payload, None)
-        except ProtocolError as exc:
-            self._write_undecoded(key, payload, log_ns, f"{type(exc).__name__}: {exc}")
-            return
-        except Exception as exc:  # noqa: BLE001 — a codec bug must not lose the payload
-            self._write_undecoded(key, payload, log_ns, f"{type(exc).__name__}: {exc}")
-            return
-        channel = self._channel(key, message.KIND)
-        data = json.dumps(to_map(message), separators=(",", ":")).encode()
-        publish = publish_ns if publish_ns is not None else _message_time_ns(message, log_ns)
-        sequence = getattr(message, "seq", 0) & 0xFFFFFFFF
-        self._add(channel, key, log_ns, data, publish, sequence)
+        record = wire_record(key, payload, log_ns, publish_ns)
+        if record.message is None:
+            self.counts.undecoded += 1
+        self._add(record)
+        if self.derive is not None and record.message is not None:
+            try:
+                derived = self.derive(record)
+            except Exception as exc:  # noqa: BLE001 — a view that cannot be drawn must not stop the recording
+                self.counts.derive_errors += 1
+                self.counts.derive_error = self.counts.derive_error or f"{type(exc).__name__}: {exc}"
+                return
+            for extra in derived:
+                self._add(extra)
 
-    def _write_undecoded(self, key: str, payload: bytes, log_ns: int, error: str) -> None:
-        self.counts.undecoded += 1
-        channel = self._channel(UNDECODED_TOPIC, UNDECODED_SCHEMA_NAME)
-        data = json.dumps({"key": key, "error": error[:512], "size": len(payload),
-                           "payload_base64": base64.b64encode(payload).decode()}).encode()
-        self._add(channel, UNDECODED_TOPIC, log_ns, data, log_ns, 0)
-
-    def _add(self, channel: int, topic: str, log_ns: int, data: bytes, publish_ns: int, sequence: int) -> None:
+    def _add(self, record: JsonRecord) -> None:
         try:
-            self._writer.add_message(channel, log_time=log_ns, data=data, publish_time=publish_ns, sequence=sequence)
+            channel = self._channel(record)
+            self._writer.add_message(channel, log_time=record.log_time, data=record.data,
+                                     publish_time=record.publish_time, sequence=record.sequence)
         except OSError as exc:
             self._fail(exc)
             self.counts.dropped += 1
             return
         self.counts.messages += 1
-        self.counts.per_topic[topic] = self.counts.per_topic.get(topic, 0) + 1
+        self.counts.per_topic[record.topic] = self.counts.per_topic.get(record.topic, 0) + 1
 
-    def _channel(self, topic: str, kind: str) -> int:
-        channel = self._channels.get((topic, kind))
+    def _channel(self, record: JsonRecord) -> int:
+        channel = self._channels.get((record.topic, record.kind))
         if channel is None:
-            schema = self._schemas.get(kind)
+            schema = self._schemas.get(record.schema_name)
             if schema is None:
-                body = UNDECODED_SCHEMA if kind == UNDECODED_SCHEMA_NAME else MESSAGE_SCHEMAS[kind]
-                schema = self._writer.register_schema(body["title"], SCHEMA_ENCODING, schema_bytes(body))
-                self._schemas[kind] = schema
-            channel = self._writer.register_channel(topic, MESSAGE_ENCODING, schema, {"kind": kind})
-            self._channels[(topic, kind)] = channel
+                schema = self._writer.register_schema(record.schema_name, SCHEMA_ENCODING, schema_bytes(record.schema))
+                self._schemas[record.schema_name] = schema
+            channel = self._writer.register_channel(record.topic, MESSAGE_ENCODING, schema, {"kind": record.kind})
+            self._channels[(record.topic, record.kind)] = channel
         return channel

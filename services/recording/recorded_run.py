@@ -81,6 +81,8 @@ def load_run(path: Path | str) -> RecordedRun:
     topic_times: dict[str, list[float]] = {}
     t0 = None
     for message in reader.messages():
+        if message.view:              # drawn from the messages below: nothing of its own to plot
+            continue
         t0 = message.log_time if t0 is None else t0
         t = (message.log_time - t0) / 1e9
         topic_times.setdefault(message.topic, []).append(t)

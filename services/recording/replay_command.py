@@ -8,7 +8,8 @@ Re-publishes a recording's messages on their Zenoh keys with the recorded spacin
 
 Decoded messages are re-encoded from their JSON (the same MessagePack map, validated by the wire
 codec again); payloads the recorder could not decode are re-published byte for byte on the key
-they arrived on. Never point a replay at a running controller: the recorded operator commands
+they arrived on; the derived views (``sharedctl/view/…``: foxglove.Log, foxglove.SceneUpdate) never crossed
+Zenoh and are not re-published. Never point a replay at a running controller: the recorded operator commands
 would drive it (the replay publishes on its own endpoint; only peers that connect to it hear it).
 """
 from __future__ import annotations
@@ -70,6 +71,7 @@ def wire_payload(message: RecordedMessage) -> tuple[str, bytes]:
 class ReplayReport:
     published: int = 0
     skipped: int = 0
+    views: int = 0              # derived views in the file, not re-published
     keys: int = 0
     recorded_seconds: float = 0.0
     wall_seconds: float = 0.0
@@ -91,6 +93,9 @@ def replay(path, session, speed: float = 1.0, stop: StopFlag | None = None) -> R
         for message in reader.messages():
             if stop.stopped:
                 break
+            if message.view:
+                report.views += 1
+                continue
             try:
                 key, payload = wire_payload(message)
             except ReplayError:

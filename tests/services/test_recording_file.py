@@ -67,6 +67,35 @@ def test_every_message_is_recorded_as_its_json_map_on_its_key(tmp_path):
     assert counts.messages == len(items) and counts.undecoded == 0 and counts.dropped == 0
 
 
+def test_derived_views_are_written_beside_their_message_and_a_failing_one_loses_nothing(tmp_path):
+    from sharedctl.services.recording.views import views_for
+
+    views = views_for(ROBOT, "paper_convex")
+    calls = []
+
+    def derive(record):
+        calls.append(record.topic)
+        if len(calls) == 2:
+            raise RuntimeError("a view that cannot be drawn")
+        return views(record)
+
+    recorder = McapRecorder(tmp_path / "r.mcap", {}, derive=derive)
+    for n, (key, message) in enumerate(samples()[:3] + samples()[-2:-1]):     # state, truth, command, event
+        recorder.put(key, encode_message(message), log_time_ns=T0 + n)
+    counts = recorder.close()
+    messages, _ = read_all(tmp_path / "r.mcap")
+    assert [(m.topic, m.schema, m.log_time) for m in messages] == [
+        (keys.state_key(ROBOT), "sharedctl.RobotState", T0),
+        (f"sharedctl/view/{ROBOT}/scene", "foxglove.SceneUpdate", T0),
+        (keys.truth_key(ROBOT), "sharedctl.GroundTruth", T0 + 1),       # its derive call failed: the message stays
+        (keys.operator_cmd_key(ROBOT), "sharedctl.OperatorCommand", T0 + 2),
+        (keys.events_key(ROBOT), "sharedctl.Event", T0 + 3), (f"sharedctl/view/{ROBOT}/log", "foxglove.Log", T0 + 3)]
+    assert counts.derive_errors == 1 and "cannot be drawn" in counts.derive_error
+    assert json.loads(messages[-1].data)["message"] == "info: hello" and messages[-1].view
+    scene = json.loads(messages[1].data)
+    assert [e["id"] for e in scene["entities"]] == ["admissible_set", "robot", "reference"]
+
+
 def test_channels_carry_a_jsonschema_and_json_encoding_per_kind(tmp_path):
     record(tmp_path / "r.mcap", [(k, encode_message(m)) for k, m in samples()]).close()
     summary = make_reader(open(tmp_path / "r.mcap", "rb")).get_summary()
