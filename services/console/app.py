@@ -44,7 +44,7 @@ from .dashboard import DashboardView, map_size, render
 from .keyboard import VirtualJoystick, parse_keys
 from .lease_client import LeaseClient
 from .map_view import MapFrame, background
-from .operator import CommandCounter, KeyboardCommandSource, ScriptedCommandSource
+from .operator import CommandCounter, JoystickCommandSource, ScriptedCommandSource
 from .terminal import KeyReader
 
 REDRAW_PERIOD = 0.2   # s
@@ -125,7 +125,7 @@ class ConsoleApp:
         self.loop, self.q0 = loop, np.asarray(q0, float)
         counter = CommandCounter(operator_id=options.operator_id)
         self.script = ScriptedCommandSource(loop.human, counter) if options.script else None
-        self.keyboard = KeyboardCommandSource(VirtualJoystick(deadman_mode=options.deadman_mode), counter)
+        self.keyboard = JoystickCommandSource(VirtualJoystick(deadman_mode=options.deadman_mode), counter)
         self.telemetry = Telemetry()
         self.lease = LeaseClient(options.robot_id, options.operator_id, counter.session_id, signer=options.signer)
         self.telemetry.lease_listener = self.lease.on_state
