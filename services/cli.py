@@ -48,6 +48,7 @@ EXTRAS = {
     "dask": "montecarlo",
     "distributed": "montecarlo",
     "scipy": "montecarlo",
+    "evdev": "gamepad",
 }
 
 # Options whose study imports an extra's module only when it gets there (at the end of a long

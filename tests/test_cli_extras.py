@@ -44,6 +44,7 @@ def without(monkeypatch):
     (["plot", "--out", "figure.png", "run.json"], "matplotlib"),
     (["plot", "--help"], "matplotlib"),
     (["compare", "--quick"], "quadprog"),
+    (["console", "--input", "gamepad", "--headless", "--duration", "1"], "evdev"),
 ])
 def test_a_command_whose_module_needs_a_missing_extra_exits_2_naming_the_extra(without, capsys, argv, module):
     without(module)
