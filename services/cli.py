@@ -50,6 +50,7 @@ EXTRAS = {
     "distributed": "montecarlo",
     "scipy": "montecarlo",
     "foxglove": "foxglove",
+    "evdev": "gamepad",
 }
 
 # Options whose study imports an extra's module only when it gets there (at the end of a long

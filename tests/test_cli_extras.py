@@ -46,6 +46,7 @@ def without(monkeypatch):
     (["plot", "--help"], "matplotlib"),
     (["compare", "--quick"], "quadprog"),
     (["foxglove", "--connect", "tcp/127.0.0.1:7447"], "foxglove"),
+    (["console", "--input", "gamepad", "--headless", "--duration", "1"], "evdev"),
 ])
 def test_a_command_whose_module_needs_a_missing_extra_exits_2_naming_the_extra(without, capsys, argv, module):
     without(module)

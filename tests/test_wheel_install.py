@@ -78,7 +78,7 @@ def test_the_wheel_holds_the_scenarios_the_dbc_the_license_and_the_entry_point(i
     names = set(zipfile.ZipFile(installed["wheel"]).namelist())
     assert {"sharedctl/scenarios/paper_convex.toml", "sharedctl/scenarios/paper_nonconvex.toml",
             "sharedctl/scenarios/adversarial_wall.toml", "sharedctl/protocol/odrive_cansimple.dbc",
-            "sharedctl/__main__.py"} <= names
+            "sharedctl/services/console/gamepad_xbox.toml", "sharedctl/__main__.py"} <= names
     assert any(n.endswith(".dist-info/licenses/LICENSE") for n in names)
     assert not any(n.startswith("tests/") for n in names)
 

@@ -7,11 +7,15 @@ keyboard and redraws the dashboard (5 Hz), so a slow redraw never delays a comma
 Script mode: the scenario's scripted operator drives; its clock starts when the first
 RobotState arrives (the controller is up), and nothing is sent before that. Keyboard mode:
 the virtual joystick drives (before the first RobotState its wish is around the scenario's
-initial pose). In both modes X/Esc requests an emergency stop and C clears the request.
+initial pose). Gamepad mode: a gamepad drives instead (gamepad.py), read by its own thread
+(gamepad_device.py); when its enable button is let go, it is unplugged or it presses estop, the
+sender sends at once instead of at its next tick. In every mode X/Esc requests an emergency stop
+and C clears the request (in gamepad mode also the pad's).
 
-Hands-off when the console cannot see (keyboard mode): while its own UI loop has not run for
+Hands-off when the console cannot see (keyboard and gamepad mode): while its own UI loop has not run for
 `UI_STALE` s (frozen terminal, stalled redraw) or the last RobotState is older than
-`TELEMETRY_STALE` s (the operator would drive on an old picture), every command goes out with the
+`TELEMETRY_STALE` s (the operator would drive on an old picture), or the gamepad is unplugged or
+resynchronising after dropped events, every command goes out with the
 deadman released, no deflection and the wish at the last known pose (an estop request still goes
 out); the dashboard says why. The scripted operator follows its script whatever it sees.
 Send times come from a wall clock that never steps (`lifecycle.steady_wall`), so a step of this
@@ -45,12 +49,14 @@ from .dashboard import DashboardView, map_size, render
 from .keyboard import VirtualJoystick, parse_keys
 from .lease_client import LeaseClient
 from .map_view import MapFrame, background
-from .operator import CommandCounter, KeyboardCommandSource, ScriptedCommandSource
+from .operator import CommandCounter, JoystickCommandSource, ScriptedCommandSource
 from .terminal import KeyReader
 
 REDRAW_PERIOD = 0.2   # s
 KEYS_SCRIPT = "script drives · x/Esc estop · c clear estop · t/r take/release · Ctrl-C quit"
 KEYS_KEYBOARD = "arrows/WASD move · q/e yaw · space deadman · x/Esc estop · c clear · t/r take/release · Ctrl-C quit"
+KEYS_GAMEPAD = "the gamepad drives · x/Esc estop · c clear estop · t/r take/release · Ctrl-C quit"
+GAMEPAD_KEYS = ("x", "esc", "c", "t", "r")    # the terminal's keys that still count while a gamepad drives
 
 
 @dataclass
@@ -67,6 +73,7 @@ class ConsoleOptions:
     deadman_mode: str = "hold"
     zenoh_config: str | None = None  # Zenoh JSON5 file (credentials, TLS, mode); endpoints above replace its own
     signer: object = None            # security.signing.Signer: commands and lease queries signed; None: unsigned
+    gamepad: object = None           # gamepad_device.GamepadReader, opened: the pad drives (instead of the keys)
 
 
 class Telemetry:
@@ -126,7 +133,10 @@ class ConsoleApp:
         self.loop, self.q0 = loop, np.asarray(q0, float)
         counter = CommandCounter(operator_id=options.operator_id)
         self.script = ScriptedCommandSource(loop.human, counter) if options.script else None
-        self.keyboard = KeyboardCommandSource(VirtualJoystick(deadman_mode=options.deadman_mode), counter)
+        self.keyboard = JoystickCommandSource(VirtualJoystick(deadman_mode=options.deadman_mode), counter)
+        self.gamepad = options.gamepad if not options.script else None
+        self.gamepad_source = None if self.gamepad is None else JoystickCommandSource(self.gamepad.pad, counter)
+        self.urgent = threading.Event()       # set: the sender sends now (the pad stopped driving, or estop)
         self.telemetry = Telemetry()
         self.lease = LeaseClient(options.robot_id, options.operator_id, counter.session_id, signer=options.signer)
         self.telemetry.lease_listener = self.lease.on_state
@@ -155,26 +165,69 @@ class ConsoleApp:
                 return self.script.command(now - self.script_origin, state, estop=estop)
             pose = self.q0 if state is None else np.asarray(state.q, float)
             self.blind = blind(now, self.ui_alive_at, arrival)
-            command = self.keyboard.command(now, pose, hands_off=self.blind is not None)
+            source = self.keyboard
+            if self.gamepad_source is not None:
+                source, pad = self.gamepad_source, self.gamepad_source.joystick
+                self.blind = self.blind or pad.status
+                estop = estop or pad.estop
+            command = source.command(now, pose, hands_off=self.blind is not None, estop=estop)
             if self.blind is not None and (holding or command.estop):
                 self.blind_commands += 1
             return command if holding or command.estop else None
 
     def sender(self, publisher, stop: StopFlag) -> None:
+        """One command every 1/rate s; one more at once whenever `urgent` is set (off the grid, which stays)."""
         clock = RateClock(1.0 / self.options.rate)
-        signer, key = self.options.signer, str(publisher.key_expr)
         while not stop.stopped:
-            command = self.next_command(time.monotonic())
-            if command is not None:
-                try:
-                    payload = encode_message(command, ROBOT_DIMS)
-                    publisher.put(payload, attachment=None if signer is None else signer.attachment(key, payload))
-                    self.sent += 1
-                except Exception:  # noqa: BLE001 — a failed put must not end the operator loop
-                    self.publish_errors += 1
-                with self.lock:
-                    self.last_command = command
+            self.send(publisher, time.monotonic())
+            while self.urgent.wait(max(0.0, clock.next - time.monotonic())):
+                self.urgent.clear()
+                if stop.stopped:
+                    return
+                self.send(publisher, time.monotonic())
             clock.wait()
+
+    def send(self, publisher, now: float) -> None:
+        command = self.next_command(now)
+        if command is None:
+            return
+        signer, key = self.options.signer, str(publisher.key_expr)
+        try:
+            payload = encode_message(command, ROBOT_DIMS)
+            publisher.put(payload, attachment=None if signer is None else signer.attachment(key, payload))
+            self.sent += 1
+        except Exception:  # noqa: BLE001 — a failed put must not end the operator loop
+            self.publish_errors += 1
+        with self.lock:
+            self.last_command = command
+
+    def on_keys(self, pressed: list[str], now: float) -> None:
+        """Keys typed on the terminal (keyboard.py's names); while a gamepad drives, only estop, clear and
+        take/release count, and C clears the pad's estop request too."""
+        if self.gamepad_source is not None:
+            pressed = [key for key in pressed if key in GAMEPAD_KEYS]
+        with self.lock:
+            self.keyboard.joystick.press_all(pressed, now)
+            if self.gamepad_source is not None and "c" in pressed:
+                self.gamepad_source.joystick.clear_estop()
+        for key in pressed:
+            if key in ("t", "r"):
+                self.lease.want(key == "t")
+
+    def on_gamepad(self, actions: list[str]) -> None:
+        """The pad's actions (gamepad.py), from its reader thread."""
+        for action in actions:
+            if action in ("take", "release"):
+                self.lease.want(action == "take")
+            elif action == "clear_estop":
+                with self.lock:
+                    self.keyboard.joystick.estop = False
+        if "stop" in actions or "estop" in actions:
+            self.urgent.set()
+
+    @property
+    def mode(self) -> str:
+        return "script" if self.script else "gamepad" if self.gamepad_source else "keyboard"
 
     # ----- the dashboard ----------------------------------------------------
     def map_points(self) -> list:
@@ -190,10 +243,11 @@ class ConsoleApp:
             state, arrival = tel.state, tel.state_arrival
             view = DashboardView(
                 title=f"sharedctl console · {self.options.robot_id} · {self.options.scenario.name}",
-                mode="script" if self.script else "keyboard", state=state,
+                mode=self.mode, state=state,
                 state_age=None if arrival is None else now - arrival, states_received=tel.states,
                 events=deque(tel.events, maxlen=6), trail=deque(tel.trail, maxlen=400), frame=frame, grid=grid,
-                keys_help=KEYS_SCRIPT if self.script else KEYS_KEYBOARD, time_origin=tel.time_origin,
+                keys_help=KEYS_SCRIPT if self.script else KEYS_GAMEPAD if self.gamepad_source else KEYS_KEYBOARD,
+                time_origin=tel.time_origin,
             )
         with self.lock:
             view.command = self.last_command
@@ -211,7 +265,7 @@ class ConsoleApp:
         opts = self.options
         start = time.monotonic()
         session = open_configured(opts.zenoh_config, opts.listen, opts.connect)
-        live = None
+        live = pad_reader = None
         try:
             subscribers = [
                 session.declare_subscriber(keys.state_key(opts.robot_id), self.telemetry.on_state),
@@ -222,6 +276,10 @@ class ConsoleApp:
             sender.start()
             leaser = threading.Thread(target=self.lease.run, args=(session, stop), name="operator-lease", daemon=True)
             leaser.start()
+            if self.gamepad is not None:
+                pad_reader = threading.Thread(target=self.gamepad.run, args=(stop, self.lock, self.on_gamepad),
+                                              name="operator-gamepad", daemon=True)
+                pad_reader.start()
             with KeyReader() if interactive else _NoKeys() as reader:
                 if interactive:
                     live = self._start_live()
@@ -234,18 +292,14 @@ class ConsoleApp:
                         break
                     typed = reader.read()
                     if typed:
-                        pressed = parse_keys(typed)
-                        with self.lock:
-                            self.keyboard.joystick.press_all(pressed, now)
-                        for key in pressed:
-                            if key in ("t", "r"):
-                                self.lease.want(key == "t")
+                        self.on_keys(parse_keys(typed), now)
                     if live is not None and now >= next_draw:
                         frame, grid, grid_yaw = self._map(live, frame, grid, grid_yaw)
                         live.update(render(self.view(frame, grid)), refresh=True)
                         next_draw = now + REDRAW_PERIOD
                     stop.wait(0.02)
                 stop.stop()
+                self.urgent.set()                 # the sender ends now, not at its next tick
                 if live is not None:
                     live.stop()
                     live = None
@@ -261,12 +315,17 @@ class ConsoleApp:
             if live is not None:
                 live.stop()
             session.close()
+            if pad_reader is not None:
+                pad_reader.join(timeout=0.5)      # waits ≤ 0.1 s for events, then sees the stop
+            if self.gamepad is not None and (pad_reader is None or not pad_reader.is_alive()):
+                self.gamepad.close()
         tel = self.telemetry
         last = "none" if tel.state is None else f"seq {tel.state.seq} t={tel.state.time:.2f} s"
-        print(f"sharedctl console: {'script' if self.script else 'keyboard'} {opts.robot_id}: "
+        pad = "" if self.gamepad is None else f"; {self.gamepad.describe()}"
+        print(f"sharedctl console: {self.mode} {opts.robot_id}: "
               f"sent {self.sent} commands in {time.monotonic() - start:.1f} s, received {tel.states} states "
               f"(last {last}), {tel.event_count} events, {tel.rejected} rejected; control {self.lease.status()}, "
-              f"{self.lease.replies}/{self.lease.queries} lease queries answered", file=out, flush=True)
+              f"{self.lease.replies}/{self.lease.queries} lease queries answered{pad}", file=out, flush=True)
         return 0
 
     def _start_live(self):

@@ -1,4 +1,4 @@
-"""Turning an operator (scripted or at the keyboard) into OperatorCommand messages.
+"""Turning an operator (scripted, at the keyboard or on a gamepad) into OperatorCommand messages.
 
 The scripted operator is the scenario's human model (`sharedctl.human.ScriptedOperator`, the
 paper's imitated human): at elapsed time t it reads the pose q and the estimated velocity q̇̂
@@ -79,15 +79,18 @@ class ScriptedCommandSource:
 
 
 @dataclass
-class KeyboardCommandSource:
-    """The keyboard virtual joystick: wish q_d = pose + reach ∘ deflection, at rest (q̇_d = q̈_d = 0)."""
+class JoystickCommandSource:
+    """A handle the operator deflects — the keyboard's virtual joystick or a gamepad (gamepad.py), both
+    answering `deflection`, `wish`, `deadman`, `estop` and `control_request` — as commands: wish
+    q_d = pose + reach ∘ deflection, at rest (q̇_d = q̈_d = 0)."""
 
     joystick: VirtualJoystick = field(default_factory=VirtualJoystick)
     counter: CommandCounter = field(default_factory=CommandCounter)
 
-    def command(self, now: float, pose, *, send_time: float | None = None, hands_off: bool = False) -> OperatorCommand:
+    def command(self, now: float, pose, *, send_time: float | None = None, hands_off: bool = False,
+                estop: bool | None = None) -> OperatorCommand:
         """The command at monotonic time `now` for the latest pose estimate; `hands_off`: deadman released, no
-        deflection, the wish at the pose (an estop request still goes out)."""
+        deflection, the wish at the pose (an estop request still goes out); `estop`: None is the joystick's."""
         pose = np.asarray(pose, float)
         deflection = self.joystick.deflection(now) * (0.0 if hands_off else 1.0)
         wish = pose if hands_off else self.joystick.wish(pose, now)
@@ -102,6 +105,6 @@ class KeyboardCommandSource:
             qd_d=zeros,
             qdd_d=zeros,
             deadman=self.joystick.deadman(now) and not hands_off,
-            estop=self.joystick.estop,
+            estop=self.joystick.estop if estop is None else estop,
             control_request=ControlRequest.NONE if hands_off else self.joystick.control_request(now),
         )

@@ -6,7 +6,7 @@ from sharedctl.protocol.messages import Authority, ControlRequest, LinkHealth, O
 from sharedctl.protocol.msgpack_codec import decode_message, encode_message
 from sharedctl.protocol.wire_types import ROBOT_DIMS
 from sharedctl.services.console.operator import (
-    CommandCounter, KeyboardCommandSource, ScriptedCommandSource, clip_deflection, new_session_id,
+    CommandCounter, JoystickCommandSource, ScriptedCommandSource, clip_deflection, new_session_id,
 )
 from sharedctl.services.scenario_files import load
 
@@ -69,7 +69,7 @@ def test_session_ids_are_random_tokens():
 
 
 def test_keyboard_command_carries_stick_deadman_estop_and_request():
-    source = KeyboardCommandSource()
+    source = JoystickCommandSource()
     for key in ("up", "space", "t"):
         source.joystick.press(key, 0.0)
     cmd = source.command(0.0, np.array([0.0, 1.0, 0.0]))
@@ -89,6 +89,6 @@ def test_send_times_come_from_a_wall_clock_that_never_steps(monkeypatch):
     before = lifecycle.steady_wall()
     real = time_module.time
     monkeypatch.setattr(time_module, "time", lambda: real() - 2.0)      # the host's clock stepped back 2 s
-    source = KeyboardCommandSource()
+    source = JoystickCommandSource()
     sent = source.command(0.0, (0.0, 0.0, 0.0)).send_time
     assert before <= sent < before + 1.0
