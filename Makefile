@@ -23,12 +23,14 @@ demo: $(STAMP)
 	$(BIN)/sharedctl demo --scenario paper_convex --json out/demo.json
 
 # Lint first (configuration in pyproject.toml, [tool.ruff]). Then the pure tests (simulations,
-# codecs) on two workers; tests that start processes or open sockets (marked `processes`) one at a
-# time afterwards, so their timing is not disturbed by the workers.
+# codecs) on two workers, a file at a time (the packaged scenarios' runs are computed once per
+# run and shared by the workers: tests/helpers.py); tests that start processes or open sockets
+# (marked `processes`) one at a time afterwards, so their timing is not disturbed by the workers.
+# Each phase lists its slowest tests.
 test: $(STAMP)
 	$(BIN)/ruff check .
-	$(BIN)/python -m pytest -n 2 --dist loadfile -m "not processes"
-	$(BIN)/python -m pytest -m processes
+	$(BIN)/python -m pytest -n 2 --dist loadfile --durations=15 -m "not processes"
+	$(BIN)/python -m pytest --durations=15 -m processes
 
 paper: $(STAMP)
 	$(BIN)/sharedctl paper --out docs/paper

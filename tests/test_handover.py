@@ -9,20 +9,12 @@ import pytest
 
 from sharedctl.metrics import FORCE_JUMP_SHARE, handover, summarize
 from sharedctl.services.robot.plant import RobotSimConfig
-from sharedctl.services.scenario_files import load
 from sharedctl.sharing import Authority
-from sharedctl.simulator import simulate
+
+from .helpers import packaged_run
 
 DRIVE_LIMIT = RobotSimConfig().torque_limit         # N·m per wheel, the simulated drives' clamp
-RUNS = {}
-
-
-def run(name, controller):
-    if (name, controller) not in RUNS:
-        scenario = load(name)
-        loop, q0, v0 = scenario.closed_loop(controller)
-        RUNS[name, controller] = (simulate(loop, q0, v0, scenario.duration, scenario.dt), scenario.dt)
-    return RUNS[name, controller]
+run = packaged_run
 
 
 CASES = [(name, c) for name in ("paper_convex", "paper_nonconvex") for c in ("ce", "nce", "of")]

@@ -9,8 +9,6 @@ with ṽ held:
 from __future__ import annotations
 
 import functools
-import tomllib
-from importlib import resources
 
 import numpy as np
 import pytest
@@ -21,12 +19,12 @@ from sharedctl.controllers import Adaptation, OutputFeedbackBarrierLaw
 from sharedctl.controllers.output_feedback_barrier import KAPPA
 from sharedctl.metrics import summarize
 from sharedctl.sampled import simulate_sampled
-from sharedctl.scenario import parse
 from sharedctl.sharing import Authority, LawRole, Mode
 from sharedctl.simulator import MachineController, simulate
 from sharedctl.transform import bounded_reference_signals, coordinates
 
-from .helpers import PAPER_CONVEX_K, PAPER_CONVEX_T, WALL_K, WALL_T, line, omni_loop
+from .helpers import PAPER_CONVEX_K, PAPER_CONVEX_T, WALL_K, WALL_T, line, omni_loop, packaged_run
+
 
 PERIOD = 0.002                        # the daemon's 500 Hz
 SCENARIOS = ("paper_convex", "paper_nonconvex", "adversarial_wall")
@@ -201,11 +199,8 @@ def approach(speed):
 @functools.lru_cache(maxsize=None)
 def scenario_run(name):
     """The run `sharedctl sim <name> --controller of` makes, and its summary."""
-    data = tomllib.loads(resources.files("sharedctl").joinpath(f"scenarios/{name}.toml").read_text())
-    scenario = parse(data)
-    loop, q0, v0 = scenario.closed_loop("of")
-    trace = simulate(loop, q0, v0, scenario.duration, scenario.dt)
-    return trace, summarize(trace, scenario.dt)
+    trace, dt = packaged_run(name, "of")
+    return trace, summarize(trace, dt)
 
 
 def intervening(trace):

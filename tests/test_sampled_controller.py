@@ -5,9 +5,10 @@ import pytest
 from sharedctl.metrics import summarize
 from sharedctl.sampled import simulate_sampled
 from sharedctl.shared_controller import NonFiniteCommand, OperatorInput, SharedController
-from sharedctl.simulator import simulate
 from sharedctl.transform import Desired
 from sharedctl.services.scenario_files import load
+
+from .helpers import packaged_run
 
 PERIOD = 0.002   # 500 Hz, the daemon's loop rate
 
@@ -26,10 +27,11 @@ def test_sampled_run_matches_the_continuous_simulation():
     """Stated tolerance: final pose within 2 cm, authority share within 5 points, margins within 5 mm."""
     scenario = load("paper_convex")
     loop, q0, v0 = scenario.closed_loop("ce")
-    cont = summarize(simulate(loop, q0, v0, 20.0, 1e-3), 1e-3)
+    cont_trace, dt = packaged_run("paper_convex", "ce")           # 20 s at 1 ms
+    assert (scenario.duration, dt) == (20.0, 1e-3)
+    cont = summarize(cont_trace, dt)
     sampled_trace = simulate_sampled(loop, q0, v0, 20.0, PERIOD)
     samp = summarize(sampled_trace, PERIOD)
-    cont_trace = simulate(loop, q0, v0, 20.0, 1e-3)
     assert np.linalg.norm(cont_trace.q[-1] - sampled_trace.q[-1]) < 0.02
     assert abs(cont["human_authority"] - samp["human_authority"]) < 0.05
     assert abs(cont["min_margin"] - samp["min_margin"]) < 0.005

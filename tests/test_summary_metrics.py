@@ -27,6 +27,8 @@ from sharedctl.sets import SetClass
 from sharedctl.sharing import Authority, LawRole, Mode, SharingParameters
 from sharedctl.simulator import ClosedLoop, Trace, make_controller, simulate
 
+from .helpers import packaged_run
+
 HUMAN, SHARED, MACHINE = int(Authority.HUMAN), int(Authority.SHARED), int(Authority.MACHINE)
 SAFE, HYSTERESIS, HAZARD = int(SetClass.SAFE), int(SetClass.HYSTERESIS), int(SetClass.HAZARD)
 DT = 0.001
@@ -176,12 +178,10 @@ def test_a_fallback_to_another_configurations_law_does_not_count_as_the_own_law(
 def test_output_feedback_counts_its_barrier_law_in_the_hazard_role_as_its_own():
     """`of` runs its own barrier law on v̂ in the hazard role (docs/control.md §4.3): on the adversarial
     wall, where the machine acts in that role, every machine sample counts."""
-    scenario = packaged("adversarial_wall")
-    loop, q0, v0 = scenario.closed_loop("of")
-    trace = simulate(loop, q0, v0, scenario.duration, scenario.dt)
+    trace, dt = packaged_run("adversarial_wall", "of")
     machine = trace.authority != HUMAN
     assert np.any(trace.role[machine] == int(LawRole.HAZARD))
-    assert summarize(trace, scenario.dt)["law_share"] == 1.0
+    assert summarize(trace, dt)["law_share"] == 1.0
 
 
 # ----- theta_error --------------------------------------------------------------------------------
