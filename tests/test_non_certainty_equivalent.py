@@ -27,7 +27,7 @@ from sharedctl.sharing import Authority, Mode
 from sharedctl.simulator import MachineController, make_controller, simulate
 from sharedctl.transform import Desired, coordinates, reference_velocity_acceleration, z_dot
 
-from .helpers import HALF_PI, WALL_K, WALL_T, line, omni_loop
+from .helpers import HALF_PI, WALL_K, WALL_T, line, omni_loop, packaged_run
 
 BOX_K = [[1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0], [0, 0, 1], [0, 0, -1]]
 BOX_T = [-3, -3, -3, -3, -HALF_PI, -HALF_PI]
@@ -331,11 +331,7 @@ def test_nce_and_ce_sim_summaries_differ_under_sharing(tmp_path):
 
 def test_nce_and_ce_machine_forces_differ_under_sharing():
     """The paper's convex scenario: same samples until the machine first acts, then different u_f."""
-    traces = {}
-    for kind in ("ce", "nce"):
-        loop, q0, v0 = load("paper_convex").closed_loop(kind)
-        traces[kind] = simulate(loop, q0, v0, 12.0, 1e-3)         # the machine first acts at 9.81 s
-    ce, nce = traces["ce"], traces["nce"]
+    (ce, _), (nce, _) = packaged_run("paper_convex", "ce"), packaged_run("paper_convex", "nce")   # machine from 9.81 s
     engaged = np.flatnonzero(ce.authority != int(Authority.HUMAN))
     assert engaged.size
     first = engaged[0]
