@@ -10,6 +10,7 @@
                          [--lease implicit|explicit] [--lease-expiry-ms 1000] [--max-command-age-ms 500]
                          [--max-clock-skew-ms MS] [--pose checkpoint|scenario] [--checkpoint FILE|none]
                          [--checkpoint-max-age-s 60] [--operators FILE] [--json OUT]
+                         [--metrics HOST:PORT [--metrics-allow-remote]]
 
 Start (resume.py): the controller first disarms every drive and hears each one idle. With `--pose
 checkpoint` (the default) a controller that follows one that failed resumes from its checkpoint (the
@@ -24,7 +25,10 @@ lease request needs a valid Ed25519 signature by an operator the file trusts for
 that operator; the lease is then held by a verified identity (docs/security.md).
 
 At exit it prints a summary line for people and, with `--json OUT`, writes the loop statistics'
-summary as JSON (loop_stats.py: units in the key names) — what another module reads.
+summary as JSON (loop_stats.py: units in the key names) — what another module reads. `--metrics HOST:PORT`
+serves the same counters, live, as Prometheus metrics (services/metrics.py, metrics.py; docs/metrics.md):
+the server's thread is started before the loop thread is pinned, so with `--cpu N` it runs off the loop's
+CPU, and with `--priority realtime` it runs SCHED_FIFO below the loop (priority.py).
 """
 from __future__ import annotations
 
@@ -37,7 +41,7 @@ from sharedctl.protocol.keys import check_robot_id
 from sharedctl.protocol.errors import KeyExprError
 from sharedctl.scenario import ScenarioError
 
-from .. import can_bus, zenoh_session
+from .. import can_bus, metrics as metrics_server, zenoh_session
 from ..security import zenoh_config
 from ..security.signing import TrustList
 from ..lifecycle import StopFlag
@@ -47,7 +51,8 @@ from ..summary_output import write_json
 from .daemon import MAX_DELAY, ControllerDaemon
 from .daemon_config import DaemonConfig
 from . import loop_stats
-from .priority import LEVELS, keep_off_cpu, make_loop_realtime, pin_to_cpu, raise_nice
+from .priority import HELPER_PRIORITY, LEVELS, keep_off_cpu, make_loop_realtime, make_thread_realtime, pin_to_cpu, \
+    raise_nice
 from .round_trip import DEFAULT_RATE
 from . import checkpoint as checkpoints
 from .resume import DEFAULT_MAX_AGE as CHECKPOINT_MAX_AGE, POSE_SOURCES
@@ -143,6 +148,7 @@ def add_parser(subparsers) -> None:
     p.add_argument("--json", metavar="OUT",
                    help="at exit, write the summary (ticks, missed deadlines, jitter, compute and CPU per period, CAN "
                         "frames, operator commands, …; loop_stats.py) as JSON to OUT")
+    metrics_server.add_arguments(p)
     add_service_config_argument(p)
     p.set_defaults(handler=run)
 
@@ -174,6 +180,7 @@ def run(args) -> int:
         if checkpoint is not None:
             checkpoint.parent.mkdir(parents=True, exist_ok=True)
         operators = TrustList.from_file(args.operators) if args.operators else None
+        metrics_address = metrics_server.address_from_args(args)
         scenario = load(args.scenario)
         loop, q0, _ = scenario.closed_loop(args.controller)
         spec = can_bus.spec_from_args(args)
@@ -196,7 +203,7 @@ def run(args) -> int:
         scenario=scenario.name, pose=args.pose, checkpoint=checkpoint, checkpoint_max_age=args.checkpoint_max_age_s,
         operators=operators,
     )
-    bus = session = daemon = recording = None
+    bus = session = daemon = recording = exporter = None
     priority = raise_nice(args.priority)   # before Zenoh and CAN start their threads (they inherit it)
     if args.cpu is not None:
         priority += f", loop on CPU {args.cpu}, {keep_off_cpu(args.cpu)}"   # likewise inherited
@@ -206,6 +213,8 @@ def run(args) -> int:
         recording = open_process_recording(args.record, "controller", robot_id, args.scenario, scenario.name,
                                            session, spec)   # --record DIR: docs/recording.md
         daemon = ControllerDaemon(config, loop, q0, bus, session)
+        if metrics_address is not None:   # its thread inherits this one's priority and CPUs: before they change
+            exporter = serve_metrics(metrics_address, daemon, loop.controller.name, config.realtime)
         daemon.realtime = config.realtime and make_loop_realtime()   # this thread runs the loop
         if args.cpu is not None and not pin_to_cpu(args.cpu):
             priority += f" (not pinned to CPU {args.cpu})"
@@ -219,6 +228,8 @@ def run(args) -> int:
             flush=True,
         )
         summary = daemon.run(stop)
+        if exporter is not None:
+            summary["metrics_url"] = exporter.url
         print(loop_stats.summary_line(summary), flush=True)
         if args.json:
             write_json(args.json, summary)
@@ -227,6 +238,8 @@ def run(args) -> int:
         print(f"{PROG}: {type(exc).__name__}: {exc}", file=sys.stderr)
         return 1
     finally:
+        if exporter is not None:
+            exporter.close()
         if daemon is not None:
             daemon.links.undeclare()
         if recording is not None:
@@ -235,3 +248,15 @@ def run(args) -> int:
             session.close()
         if bus is not None:
             bus.shutdown()
+
+
+def serve_metrics(address, daemon: ControllerDaemon, law: str, realtime: bool):
+    """The metrics server (services/metrics.py) with the controller's collector, its thread SCHED_FIFO below the
+    loop when the loop is real-time (priority.py); prints where it listens."""
+    from .metrics import ControllerCollector      # imports prometheus_client: only with --metrics
+
+    exporter = metrics_server.serve(address, ControllerCollector(daemon, law),
+                                    thread_setup=make_thread_realtime if realtime else None)
+    fifo = f" (SCHED_FIFO {HELPER_PRIORITY})" if exporter.setup_result else ""
+    print(f"{PROG}: metrics on {exporter.url}{fifo}", flush=True)
+    return exporter

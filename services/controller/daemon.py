@@ -156,6 +156,7 @@ class ControllerDaemon:
         self.last_rejected = 0
         self.last_tick_at: float | None = None
         self.deadline: float | None = None       # the clock's deadline of the tick under way (None outside run)
+        self.clock: RateClock | None = None      # the loop's clock, once `run` has started it (metrics.py reads it)
         self.realtime = False
         self.phase_lock = SensorPhaseLock(self.period, lead=config.sensor_lead) if config.sensor_sync else None
         self.stats = LoopStats(self.period, config.torque_at, frames=self.master, commands=self.intake)
@@ -174,7 +175,7 @@ class ControllerDaemon:
         # the first (the publisher's first put is the slow one), before the clock
         self.telemetry.heartbeats(time.monotonic())
         self.master.receive_until(0.0)    # the frames queued since the bus opened: not the first period's work
-        clock = RateClock(self.period, spin=config.spin)
+        self.clock = clock = RateClock(self.period, spin=config.spin)
         t0 = stats.start()
         self.begin()
         ended = False      # stopped on purpose (stop flag, duration): the last checkpoint says so

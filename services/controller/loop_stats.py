@@ -34,7 +34,7 @@ import numpy as np
 
 
 class LatenessHistogram:
-    """Durations in 10 µs bins up to 50 ms (quantiles over the whole run, fixed memory)."""
+    """Durations in 10 µs bins up to 50 ms (quantiles over the whole run, fixed memory), their count and sum."""
 
     BIN = 1e-5
 
@@ -42,11 +42,13 @@ class LatenessHistogram:
         self.counts = np.zeros(bins + 1, dtype=np.int64)
         self.last = bins
         self.n = 0
+        self.total = 0.0      # s, the durations' sum
         self.max = 0.0
 
     def add(self, duration: float) -> None:
         self.counts[min(int(duration / self.BIN), self.last)] += 1
         self.n += 1
+        self.total += duration
         if duration > self.max:
             self.max = duration
 

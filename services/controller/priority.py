@@ -9,6 +9,13 @@ Two steps, so that only the loop thread runs real-time:
   thread that would not.
 Both fall back quietly when the process may not raise its priority; what was obtained is reported.
 
+A thread of the process that runs Python code the loop may wait for — the metrics server's
+(services/metrics.py), which holds the interpreter lock while it renders a scrape — gets SCHED_FIFO
+too, at `HELPER_PRIORITY`, below the loop's (`make_thread_realtime`): at normal priority, another
+process could preempt it while it holds the lock, and the loop, woken for its tick, would wait for
+as long as the other process runs (milliseconds on a loaded host). Its work is bounded (the metrics
+server serves at most five requests a second).
+
 Optionally a CPU of its own for the loop (`--cpu N`), also in two steps:
 * `keep_off_cpu(n)` — before Zenoh and CAN start their threads: the process (and so every thread
   created afterwards) may run on every allowed CPU but n;
@@ -25,6 +32,7 @@ import os
 LEVELS = ("realtime", "high", "normal")
 NICE = -10
 FIFO_PRIORITY = 20
+HELPER_PRIORITY = 10    # SCHED_FIFO of the threads that hold the interpreter lock the loop needs (module doc)
 
 
 def raise_nice(level: str) -> str:
@@ -44,8 +52,13 @@ def raise_nice(level: str) -> str:
 
 def make_loop_realtime() -> bool:
     """SCHED_FIFO for the calling thread; False if not permitted."""
+    return make_thread_realtime(FIFO_PRIORITY)
+
+
+def make_thread_realtime(priority: int = HELPER_PRIORITY) -> bool:
+    """SCHED_FIFO at `priority` for the calling thread; False if not permitted."""
     try:
-        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(FIFO_PRIORITY))
+        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(priority))
         return True
     except (OSError, AttributeError):
         return False

@@ -3,6 +3,7 @@
     sharedctl robot [--scenario FILE|NAME] [--can-interface I --can-channel C --can-option k=v ...]
                     [--zenoh-listen EP | --zenoh-connect EP] [--robot-id ID] [--duration S]
                     [--spin-us 100] [--cpu N] [--drive-restart AXIS,DOWN] [--json OUT]
+                    [--metrics HOST:PORT [--metrics-allow-remote]]
 
 Speaks CANSimple on the CAN bus (services/can_bus.py picks vcan0 or host-local udp_multicast),
 publishes GroundTruth on `sharedctl/v1/<robot>/truth` (100 Hz) and a liveliness token on
@@ -11,6 +12,7 @@ defaults (see plant.RobotSimConfig). SIGUSR2 restarts drive AXIS of `--drive-res
 silent for DOWN s, then back IDLE, without errors, its encoder counting from 0 (Axis.restart; the
 fault `robot.reboot_at`). SIGINT/SIGTERM: stops within 2 s, exit 0, with a summary line
 for people and, with `--json OUT`, the summary as JSON (`summary`): what another module reads.
+`--metrics HOST:PORT` serves Prometheus metrics (services/metrics.py, metrics.py; docs/metrics.md).
 """
 from __future__ import annotations
 
@@ -25,7 +27,7 @@ from sharedctl.protocol.errors import KeyExprError
 from sharedctl.protocol.keys import check_robot_id
 from sharedctl.scenario import ScenarioError
 
-from .. import can_bus, zenoh_session
+from .. import can_bus, metrics as metrics_server, zenoh_session
 from ..security import zenoh_config
 from ..lifecycle import StopFlag
 from ..service_config import add_argument as add_service_config_argument
@@ -61,6 +63,7 @@ def add_parser(subparsers) -> None:
     p.add_argument("--drive-restart", default="1,0.5", metavar="AXIS,DOWN",
                    help="what SIGUSR2 does: drive AXIS (0, 1, 2) loses power for DOWN s and comes back as a drive "
                         "that booted (default 1,0.5)")
+    metrics_server.add_arguments(p)
     add_service_config_argument(p)
     p.set_defaults(handler=run)
 
@@ -94,6 +97,7 @@ def run(args) -> int:
         axis, down = (float(v) for v in args.drive_restart.split(","))
         if axis not in (0.0, 1.0, 2.0) or not down > 0:
             raise ValueError("--drive-restart: AXIS must be 0, 1 or 2 and DOWN positive")
+        metrics_address = metrics_server.address_from_args(args)
     except (ScenarioError, RobotSimConfigError, KeyExprError, ValueError) as exc:
         return _fail(str(exc))
     if args.duration is not None and not args.duration > 0:
@@ -117,10 +121,15 @@ def run(args) -> int:
         return _fail(f"cannot open Zenoh session ({' '.join(listen + connect)}): {exc}", 1)
 
     cpu = CpuMeter()
-    process = None
+    process = exporter = None
     try:
         process = RobotProcess(sim, bus, session, robot_id)
         process.drive_restart = (int(axis), down)
+        if metrics_address is not None:
+            try:
+                exporter = serve_metrics(metrics_address, process)
+            except OSError as exc:
+                return _fail(f"cannot serve metrics on {args.metrics}: {exc}", 1)
         signal.signal(signal.SIGUSR2, lambda *_: process.request_drive_restart())
         c = sim.config
         endpoint = zenoh_config.describe(args.zenoh_config, listen, connect)
@@ -129,6 +138,8 @@ def run(args) -> int:
               f"watchdog {c.watchdog_timeout:g} s{pinned}", flush=True)
         process.run(stop, args.duration, spin=args.spin_us * 1e-6)
     finally:
+        if exporter is not None:
+            exporter.close()
         if process is not None:
             process.close()
         session.close()
@@ -137,10 +148,19 @@ def run(args) -> int:
           flush=True)
     if args.json:
         try:
-            write_json(args.json, summary(process, cpu))
+            write_json(args.json, {**summary(process, cpu), **({"metrics_url": exporter.url} if exporter else {})})
         except OSError as exc:
             return _fail(f"summary not written to {args.json}: {exc}", 1)
     return 0
+
+
+def serve_metrics(address, process: RobotProcess):
+    """The metrics server (services/metrics.py) with the robot's collector; prints where it listens."""
+    from .metrics import RobotCollector      # imports prometheus_client: only with --metrics
+
+    exporter = metrics_server.serve(address, RobotCollector(process))
+    print(f"{PROG}: metrics on {exporter.url}", flush=True)
+    return exporter
 
 
 def summary(process: RobotProcess, cpu: CpuMeter) -> dict:

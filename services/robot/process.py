@@ -74,6 +74,7 @@ class RobotProcess:
         self.drive_restart = (1, 0.5)                       # (axis, s silent) a restart request means
         self._restart_requested = False
         self.clock_start = time.monotonic()                 # `now` = monotonic − clock_start
+        self.clock: RateClock | None = None                 # the loop's clock, once `run` has started it
         self.wall_minus_monotonic = time.time() - time.monotonic()
 
     # ----- CAN -------------------------------------------------------------------
@@ -151,7 +152,7 @@ class RobotProcess:
         """The loop; `spin` (s) before each tick is polled rather than slept (lifecycle.RateClock)."""
         gc.collect()
         gc.freeze()          # start-up objects out of the collector's way: shorter pauses in the loop
-        clock = RateClock(self.sim.dt, spin=spin)
+        self.clock = clock = RateClock(self.sim.dt, spin=spin)
         self.clock_start = clock.start
         self.wall_minus_monotonic = time.time() - time.monotonic()
         next_heartbeat = 0.0

@@ -1,8 +1,10 @@
 """Service settings files (`--service-config FILE.toml`): deploy/config/*.toml and the reader
 (services/service_config.py)."""
 import pytest
+import yaml
 
 from sharedctl.services.cli import build_parser, main
+from sharedctl.services.metrics import address_from_args
 from sharedctl.services.service_config import ServiceConfigError, expand
 
 from .deploy_files import DEPLOY, parse_command
@@ -69,3 +71,13 @@ def test_a_default_on_switch_can_be_turned_off_in_a_settings_file(tmp_path, valu
     path.write_text(f"sensor-sync = {value}\n")
     argv = expand(["controller", "--service-config", str(path)], build_parser())
     assert build_parser().parse_args(argv).sensor_sync is expected
+
+
+def test_the_site_scrape_configuration_scrapes_the_loopback_metrics_endpoints_of_the_settings_files():
+    scraped = {job["job_name"]: target for job in yaml.safe_load((DEPLOY / "prometheus.yml").read_text())
+               ["scrape_configs"] for target in job["static_configs"][0]["targets"]}
+    for name in ("controller", "robot"):
+        args = parse_command([name, "--service-config", str(DEPLOY / "config" / f"{name}.toml")])
+        address = address_from_args(args)
+        assert address.host == "127.0.0.1" and not args.metrics_allow_remote
+        assert scraped[f"sharedctl-{name}"] == f"{address.host}:{address.port}"
