@@ -2,6 +2,7 @@
 subscriber receives says so — the priority, congestion control and express flag travel with each sample."""
 import ast
 import threading
+import time
 from pathlib import Path
 
 import pytest
@@ -95,12 +96,11 @@ def test_a_lease_reply_comes_back_with_the_qos_its_query_asked_for():
     try:
         key = keys.lease_key("r1")
         queryable = receiver.declare_queryable(key, lambda query: query.reply(key, b"granted"))
-        replies = []
-        for _ in range(100):
+        replies, deadline = [], time.monotonic() + 10.0      # until the two peers have met
+        while not replies and time.monotonic() < deadline:
             replies = [r.ok for r in sender.get(key, payload=b"take", timeout=1.0, **zenoh_qos.options("lease"))
                        if r.ok is not None]
-            if replies:
-                break
+            time.sleep(0.02)
         assert replies, "no reply"
         qos = zenoh_qos.STREAMS["lease"]
         assert (replies[0].priority, replies[0].congestion_control, replies[0].express) == (
