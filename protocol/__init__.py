@@ -11,6 +11,8 @@ Modules
 ``messages``       OperatorCommand, RobotState, Event, Heartbeat, LeaseRequest/Reply, GroundTruth
 ``msgpack_codec``  ``encode_message`` / ``decode_message`` (bounded, versioned MessagePack)
 ``keys``           Zenoh key expressions ``sharedctl/v1/<robot>/...``
+``rmw_zenoh``      rmw_zenoh's topic keys, liveliness tokens and attachment; the pinned Jazzy type hashes
+``ros2_messages``  RobotState → nav_msgs/msg/Odometry, std_msgs/msg/String; CDR → geometry_msgs/msg/Twist (rosbags)
 ``errors``         the typed errors (all subclasses of :class:`ProtocolError`)
 ``fuzz``           seeded fuzz campaign used by the tests and ``sharedctl fuzz``
 

@@ -24,7 +24,8 @@ Hierarchy::
     │   ├── UnknownKind       kind tag we do not know
     │   ├── UnexpectedKind    a valid message of another kind than asked for
     │   ├── MissingField      a required field is absent
-    │   └── BadAttachment     an operator signature attachment that cannot be read
+    │   ├── BadAttachment     an attachment that cannot be read (operator signature, rmw_zenoh's)
+    │   └── BadCdr            a ROS 2 CDR payload that cannot be decoded, or values no robot can take
     └── KeyExprError          Zenoh key expression or id/role token
 """
 from __future__ import annotations
@@ -103,7 +104,13 @@ class MissingField(MessageError):
 
 
 class BadAttachment(MessageError):
-    """An operator signature attachment (protocol/signature.py) that is not one: size, encoding, fields."""
+    """An attachment that is not one: an operator signature (protocol/signature.py) or rmw_zenoh's publication
+    attachment (protocol/rmw_zenoh.py): size, encoding, fields."""
+
+
+class BadCdr(MessageError):
+    """A ROS 2 message (CDR, protocol/ros2_messages.py) that cannot be decoded, or whose values are not finite or
+    beyond what any robot can be asked (a Twist of 1e6 m/s)."""
 
 
 class KeyExprError(ProtocolError):

@@ -51,6 +51,7 @@ EXTRAS = {
     "scipy": "montecarlo",
     "foxglove": "foxglove",
     "evdev": "gamepad",
+    "rosbags": "ros2",
 }
 
 # Options whose study imports an extra's module only when it gets there (at the end of a long
@@ -59,6 +60,8 @@ OPTION_NEEDS = {
     ("sim", "plot"): "matplotlib",
     ("compare", "report"): "matplotlib",
     ("faults", "report"): "matplotlib",
+    ("controller", "ros2"): "rosbags",
+    ("demo", "ros2"): "rosbags",
 }
 
 
@@ -140,7 +143,8 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     try:
         for (command, option), module in OPTION_NEEDS.items():
-            if args.command == command and getattr(args, option, None):
+            value = getattr(args, option, None)
+            if args.command == command and value is not None and value is not False and value != "":   # 0 is one
                 importlib.import_module(module)
         return int(args.handler(args) or 0)
     except ModuleNotFoundError as exc:     # a study that imports its extra only when it gets there

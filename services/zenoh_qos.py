@@ -21,6 +21,9 @@ for what it is, by the kind of its key (`sharedctl.protocol.keys.KINDS`):
     truth            DATA_LOW          DROP        no       the simulator's ground truth at 100 Hz: evaluation
                                                             only, never in the way of the control path
 
+The ROS 2 topics of `controller --ros2` (rmw_zenoh's keys) publish as rmw_zenoh does for a keep-last
+publisher: Zenoh's defaults (`ROS2_KEEP_LAST`), below every control stream.
+
 `declare_publisher(session, key)` is how every process declares a publisher for a sharedctl key;
 `options("lease")` goes with `Session.get` (a reply travels with its query's QoS). A
 relay, a recorder's replay or a fault injector that re-publishes a key uses the same table, so a
@@ -51,6 +54,9 @@ class StreamQos:
 
 
 DEFAULT = StreamQos(zenoh.Priority.DATA, zenoh.CongestionControl.DROP, False)   # Zenoh's own defaults
+#: the ROS 2 topics (`controller --ros2`: odom, authority): what rmw_zenoh gives a keep-last publisher — Zenoh's
+#: defaults, below every sharedctl control stream
+ROS2_KEEP_LAST = DEFAULT
 
 STREAMS: dict[str, StreamQos] = {
     "operator_cmd": StreamQos(zenoh.Priority.REAL_TIME, zenoh.CongestionControl.BLOCK, True),

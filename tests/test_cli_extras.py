@@ -108,3 +108,19 @@ def test_the_version_is_the_installed_distributions(capsys):
     with pytest.raises(SystemExit) as stop:
         cli.main(["--version"])
     assert stop.value.code == 0 and capsys.readouterr().out == f"sharedctl {version('sharedctl')}\n"
+
+
+@pytest.mark.parametrize("argv", [["controller", "--ros2", "0"], ["controller", "--ros2"], ["demo", "--ros2", "3"]])
+def test_ros2_without_rosbags_is_refused_before_the_run_naming_the_extra(without, capsys, argv):
+    """Domain 0 is a value, not "off": the check must not take it for a missing option."""
+    without("rosbags")
+    assert cli.main(argv) == 2
+    out = capsys.readouterr()
+    assert out.err == expected(argv[0], "rosbags") and out.out == ""
+
+
+def test_the_controller_needs_no_rosbags_without_ros2(without, capsys):
+    without("rosbags")
+    with pytest.raises(SystemExit) as stop:
+        cli.main(["controller", "--help"])
+    assert stop.value.code == 0 and "--ros2" in capsys.readouterr().out

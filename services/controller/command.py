@@ -11,6 +11,7 @@
                          [--max-clock-skew-ms MS] [--pose checkpoint|scenario] [--checkpoint FILE|none]
                          [--checkpoint-max-age-s 60] [--operators FILE] [--json OUT]
                          [--metrics HOST:PORT [--metrics-allow-remote]]
+                         [--ros2 [DOMAIN] [--twist-max-linear 0.5] [--twist-max-angular 1.0]]
 
 Start (resume.py): the controller first disarms every drive and hears each one idle. With `--pose
 checkpoint` (the default) a controller that follows one that failed resumes from its checkpoint (the
@@ -23,6 +24,12 @@ start pose (a first start, a re-homing).
 With `--operators FILE` (services/security/signing.py) only signed operator traffic counts: a command or a
 lease request needs a valid Ed25519 signature by an operator the file trusts for this robot, and must name
 that operator; the lease is then held by a verified identity (docs/security.md).
+
+With `--ros2 [DOMAIN]` (the `ros2` extra) it is also a ROS 2 node over rmw_zenoh, `/ROBOT/sharedctl_controller`
+in ROS domain DOMAIN (default 0): `/ROBOT/odom` (nav_msgs/msg/Odometry) and `/ROBOT/authority`
+(std_msgs/msg/String) out at the telemetry rate, `/ROBOT/cmd_vel` (geometry_msgs/msg/Twist) in as operator
+input under the same lease, replay guard, staleness and identity rules as a console's commands
+(ros2_links.py, twist_input.py, docs/ros2.md).
 
 At exit it prints a summary line for people and, with `--json OUT`, writes the loop statistics'
 summary as JSON (loop_stats.py: units in the key names) — what another module reads. `--metrics HOST:PORT`
@@ -37,6 +44,7 @@ import os
 import sys
 from pathlib import Path
 
+from sharedctl.protocol import rmw_zenoh
 from sharedctl.protocol.keys import check_robot_id
 from sharedctl.protocol.errors import KeyExprError
 from sharedctl.scenario import ScenarioError
@@ -54,6 +62,7 @@ from . import loop_stats
 from .priority import HELPER_PRIORITY, LEVELS, keep_off_cpu, make_loop_realtime, make_thread_realtime, pin_to_cpu, \
     raise_nice
 from .round_trip import DEFAULT_RATE
+from .twist_input import DEFAULT_MAX_ANGULAR, DEFAULT_MAX_LINEAR, TwistScale
 from . import checkpoint as checkpoints
 from .resume import DEFAULT_MAX_AGE as CHECKPOINT_MAX_AGE, POSE_SOURCES
 from ..recording.launch import add_argument as add_record_argument, open_process_recording, summary_line
@@ -149,6 +158,16 @@ def add_parser(subparsers) -> None:
                    help="at exit, write the summary (ticks, missed deadlines, jitter, compute and CPU per period, CAN "
                         "frames, operator commands, …; loop_stats.py) as JSON to OUT")
     metrics_server.add_arguments(p)
+    p.add_argument("--ros2", type=int, nargs="?", const=0, metavar="DOMAIN",
+                   help="also be a ROS 2 (Jazzy) node over rmw_zenoh in this ROS domain (default 0 when given "
+                        "without a value): /ROBOT/odom and /ROBOT/authority out, /ROBOT/cmd_vel in as operator input "
+                        "(docs/ros2.md; needs the 'ros2' extra). Default: no ROS 2")
+    p.add_argument("--twist-max-linear", type=float, default=DEFAULT_MAX_LINEAR, metavar="M_S",
+                   help="with --ros2: the linear speed of a Twist that is a full joystick deflection (default "
+                        f"{DEFAULT_MAX_LINEAR:g}; faster is full deflection)")
+    p.add_argument("--twist-max-angular", type=float, default=DEFAULT_MAX_ANGULAR, metavar="RAD_S",
+                   help="with --ros2: the yaw rate of a Twist that is a full joystick deflection (default "
+                        f"{DEFAULT_MAX_ANGULAR:g})")
     add_service_config_argument(p)
     p.set_defaults(handler=run)
 
@@ -181,6 +200,11 @@ def run(args) -> int:
             checkpoint.parent.mkdir(parents=True, exist_ok=True)
         operators = TrustList.from_file(args.operators) if args.operators else None
         metrics_address = metrics_server.address_from_args(args)
+        twist_scale = None
+        if args.ros2 is not None:
+            rmw_zenoh.check_domain(args.ros2)
+            rmw_zenoh.check_token(robot_id, "--robot-id with --ros2 (a ROS 2 namespace)")
+            twist_scale = TwistScale(args.twist_max_linear, args.twist_max_angular)
         scenario = load(args.scenario)
         loop, q0, _ = scenario.closed_loop(args.controller)
         spec = can_bus.spec_from_args(args)
@@ -201,7 +225,7 @@ def run(args) -> int:
         max_command_age=args.max_command_age_ms / 1e3,
         max_clock_skew=None if args.max_clock_skew_ms is None else args.max_clock_skew_ms / 1e3,
         scenario=scenario.name, pose=args.pose, checkpoint=checkpoint, checkpoint_max_age=args.checkpoint_max_age_s,
-        operators=operators,
+        operators=operators, ros2_domain=args.ros2, twist_scale=twist_scale,
     )
     bus = session = daemon = recording = exporter = None
     priority = raise_nice(args.priority)   # before Zenoh and CAN start their threads (they inherit it)
@@ -224,6 +248,7 @@ def run(args) -> int:
             f"{config.rate:g} Hz (telemetry {config.telemetry_rate:g} Hz), torque limit {config.torque_limit:g} N·m, "
             f"CAN {spec.describe()}, Zenoh {zenoh_desc}, priority {priority}, pose from {args.pose} "
             f"(checkpoint {checkpoint or 'none'})"
+            f"{'' if daemon.ros2 is None else f', ROS 2 node {daemon.ros2.node} in domain {args.ros2}'}"
             f"{' + SCHED_FIFO loop' if daemon.realtime else ''}",
             flush=True,
         )
@@ -242,6 +267,8 @@ def run(args) -> int:
             exporter.close()
         if daemon is not None:
             daemon.links.undeclare()
+            if daemon.ros2 is not None:
+                daemon.ros2.undeclare()
         if recording is not None:
             print(summary_line(recording.close()), flush=True)
         if session is not None:

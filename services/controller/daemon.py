@@ -125,6 +125,12 @@ class ControllerDaemon:
                                      EventLimiter(config.event_interval, ROLE), config.verbose,   # zenoh_links.py
                                      trust and trust.verifier(keys.lease_key(config.robot_id), config.robot_id))
         self.intake, self.apply_commands, self.emit = self.links.intake, self.links.apply_commands, self.links.emit
+        self.ros2 = None                          # the ROS 2 node over rmw_zenoh (ros2_links.py), with --ros2
+        if config.ros2_domain is not None:
+            from .ros2_links import Ros2Links     # rosbags (the `ros2` extra) only then
+
+            self.ros2 = Ros2Links(session, config.robot_id, config.ros2_domain, self.policy, config.twist_scale)
+            self.links.extra_intakes.append(self.ros2.intake)
         self.mode = Mode.STARTING
         self.start_requested_at: float | None = None   # master clock: when IDLE went to every axis (`begin`)
         self.start_text = ""                            # what `resume.decide` decided
@@ -163,7 +169,8 @@ class ControllerDaemon:
         self.telemetry = TelemetrySchedule(
             config.telemetry_rate, self.period, self._capture_state, self.links.state_pub, self.links.alive_pub,
             self.dims, ROLE, config.robot_id,
-            failed=lambda now, text: self.emit(now, "telemetry", "info", "warning", text))
+            failed=lambda now, text: self.emit(now, "telemetry", "info", "warning", text),
+            followers=() if self.ros2 is None else (self.ros2.send_odometry, self.ros2.send_authority))
 
     # ------------------------------------------------------------------- loop
     def run(self, stop) -> dict:
@@ -212,7 +219,7 @@ class ControllerDaemon:
             "commands_accepted": self.policy.accepted, "rejections": dict(self.policy.rejections),
             "can_round_trip_ms": self.master.round_trip * 1e3, "rtt_probes": self.master.probe.counts(),
             "mode": self.mode.value, "start": self.start_text, "arming_refused": self.refusal,
-            **self.continuity.summary()})
+            **self.continuity.summary(), **({} if self.ros2 is None else {"ros2": self.ros2.summary()})})
 
     def warm_up(self) -> None:
         """One control step and one RobotState built and encoded, all discarded, before the clock starts.

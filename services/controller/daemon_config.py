@@ -43,3 +43,5 @@ class DaemonConfig:
     checkpoint_max_age: float = CHECKPOINT_MAX_AGE    # s: an older checkpoint is not resumed from
     pose_tolerance: float = 0.01        # m: wheel travel the odometry may have missed before arming is refused
     operators: object = None            # security.signing.TrustList: signed operator traffic only; None: ids as sent
+    ros2_domain: int | None = None      # ROS 2 domain of the rmw_zenoh node (ros2_links.py); None: no ROS 2
+    twist_scale: object = None          # twist_input.TwistScale: a Twist's full deflection; None: the defaults

@@ -130,6 +130,11 @@ class OperatorInputPolicy:
 
     def accept(self, command: OperatorCommand, now: float, wall_now: float | None = None) -> bool:
         """Apply the estop, ordering, age and lease policy to a decoded command."""
+        return self.admit(command, now, wall_now) is None
+
+    def admit(self, command: OperatorCommand, now: float, wall_now: float | None = None) -> str | None:
+        """`accept`, saying why not: None if the command was taken, else the reason it was refused (counted in
+        `rejections`) or "released" (the holder let go: not a rejection)."""
         if command.estop:
             self.estop_requested = True          # honoured from anyone, before any other check
         # keyed by operator and session: another sender naming this session cannot advance its seq
@@ -145,10 +150,10 @@ class OperatorInputPolicy:
             if reason is None:
                 self.guard.pin(f"{command.operator_id}/{command.session_id}")   # the lease let it act
         if reason == "released":
-            return False                         # the holder let go: not a rejection
+            return reason                        # the holder let go: not a rejection
         if reason is not None:
             self.rejections[reason] += 1
-            return False
+            return reason
         if self.current is None or command.session_id != self.current.session_id:
             self._recent.clear()
         self._recent.append(command.seq)
@@ -162,7 +167,7 @@ class OperatorInputPolicy:
             self.latency = latency if 0.0 <= latency < 60.0 else 0.0
         if command.control_request is ControlRequest.TAKE:
             self.take_requests += 1
-        return True
+        return None
 
     def clear_estop(self) -> None:
         self.estop_requested = False

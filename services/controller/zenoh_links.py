@@ -43,6 +43,7 @@ class ControllerLinks:
         self.token = session.liveliness().declare_token(keys.alive_key(robot_id, role))
         self.subscriber = session.declare_subscriber(keys.operator_cmd_key(robot_id), command_intake.channel())
         self.intake = CommandIntake(self.subscriber, policy)
+        self.extra_intakes: list = []     # other operator inputs polled with the commands (ros2_links.py: Twists)
         self.queryable = session.declare_queryable(keys.lease_key(robot_id),
                                                    zenoh.handlers.FifoChannel(LEASE_CAPACITY))
 
@@ -50,8 +51,11 @@ class ControllerLinks:
         """The operator commands that arrived, judged in arrival order, then the lease queries waiting
         (caller holds `lock`): at most `command_intake.BUDGET` and `LEASE_BUDGET` of them.
 
-        Called by the loop between CAN frames and before each tick."""
+        Called by the loop between CAN frames and before each tick. Then the same for each of `extra_intakes`
+        (each judges at most `command_intake.BUDGET` per poll as well)."""
         self.intake.apply()
+        for intake in self.extra_intakes:
+            intake.apply()
         for _ in range(LEASE_BUDGET):
             query = self.queryable.try_recv()
             if query is None:

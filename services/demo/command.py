@@ -1,5 +1,6 @@
 """`sharedctl demo [--scenario FILE|name] [--controller ce|nce|of] [--duration S] [--headless] [--json OUT]
-[--zenoh-listen ENDPOINT] [--foxglove HOST:PORT]` — the whole system on this host, measured on the ground truth.
+[--zenoh-listen ENDPOINT] [--foxglove HOST:PORT] [--ros2 [DOMAIN]]` — the whole system on this host, measured on
+the ground truth.
 
 Starts `sharedctl robot`, `sharedctl controller` and `sharedctl console --script SCENARIO` as
 child processes (headless, or the live dashboard when a terminal is attached), lets the
@@ -24,6 +25,9 @@ connects to the controller, whose telemetry it needs):
     demo        connects to R and C
     foxglove    (--foxglove) connects to R and C, listens on tcp/127.0.0.1:F; the console also connects to F
     CAN         python-can udp_multicast, host-local (hop_limit=0), a free port per run
+
+With `--ros2 [DOMAIN]` the controller is also a ROS 2 node over rmw_zenoh (docs/ros2.md): a ROS 2
+machine reaches it on the controller's endpoint (`--zenoh-listen`).
 
 The run's clock: t = 0 is the instant the controller granted the operator the lease, as it
 reports it in every RobotState (`lease_since`); the demo learns it with the first RobotState
@@ -79,6 +83,9 @@ def add_parser(subparsers) -> None:
                    help="passed to the controller: CAN feedback age that triggers Estop "
                         "(default: the controller's, 50)")
     p.add_argument("--no-reference", action="store_true", help="skip the in-process sampled reference run")
+    p.add_argument("--ros2", type=int, nargs="?", const=0, metavar="DOMAIN",
+                   help="passed to the controller: also a ROS 2 node over rmw_zenoh in this ROS domain (default 0 "
+                        "when given without a value; docs/ros2.md; needs the 'ros2' extra)")
     p.add_argument("--log-dir", metavar="DIR",
                    help="keep the children's output here (default: a temporary directory, removed on success)")
     p.add_argument("--foxglove", metavar="HOST:PORT",
@@ -141,6 +148,8 @@ def run(args) -> int:
     law = ["--controller", args.controller] if args.controller else []
     if args.feedback_timeout_ms is not None:
         law += ["--feedback-timeout-ms", str(args.feedback_timeout_ms)]
+    if args.ros2 is not None:
+        law += ["--ros2", str(args.ros2)]
     log_dir = Path(args.log_dir) if args.log_dir else Path(tempfile.mkdtemp(prefix="sharedctl-demo-"))
     log_dir.mkdir(parents=True, exist_ok=True)
     common = ["--robot-id", args.robot_id]
