@@ -29,16 +29,13 @@ What `ros2 topic list/echo/pub` over rmw_zenoh expects, from rmw_zenoh's design 
   of each type used here (`TYPE_HASHES`; the same as rosbags' Jazzy typestore computes, and
   std_msgs/msg/String's is the one the design document prints).
 
-The GID: rmw_zenoh hashes an entity's liveliness token with XXH3-128; XXH3 is no dependency of
-this project, so `gid_of` takes the first 16 bytes of BLAKE2b over the same token. ROS 2 treats
-a GID as an opaque identity (message_info's publisher_gid); it is unique per entity here too.
-The GID `ros2 topic info -v` prints (the receiver hashes the token itself) then differs from the
-one in the attachment.
+The GID (`gid_of`): as rmw_zenoh's `Entity` makes it, XXH3-128 (seed 0) of the entity's whole
+liveliness token, its low 64 bits then its high 64 bits, each little-endian — the GID `ros2 topic
+info -v` prints for the same token. XXH3 comes from the `xxhash` package (the `ros2` extra).
 """
 from __future__ import annotations
 
 import enum
-import hashlib
 import re
 import struct
 from dataclasses import dataclass
@@ -198,8 +195,10 @@ def entity_token(domain: int, session_id: str, node_id: int, entity_id: int, kin
 
 
 def gid_of(token: str) -> bytes:
-    """An entity's 16-byte GID: BLAKE2b-128 of its liveliness token (module doc: rmw_zenoh uses XXH3-128)."""
-    return hashlib.blake2b(token.encode(), digest_size=GID_SIZE).digest()
+    """An entity's 16-byte GID: XXH3-128 of its liveliness token, low 64 bits then high 64 bits, little-endian."""
+    import xxhash      # the 'ros2' extra: only a ROS 2 node needs it
+
+    return xxhash.xxh3_128_intdigest(token.encode()).to_bytes(GID_SIZE, "little")
 
 
 @dataclass(frozen=True, slots=True)

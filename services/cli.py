@@ -52,6 +52,7 @@ EXTRAS = {
     "foxglove": "foxglove",
     "evdev": "gamepad",
     "rosbags": "ros2",
+    "xxhash": "ros2",
 }
 
 # Options whose study imports an extra's module only when it gets there (at the end of a long

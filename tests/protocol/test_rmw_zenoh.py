@@ -121,6 +121,12 @@ def test_anything_but_an_rmw_zenoh_attachment_is_a_bad_attachment(data):
         rmw.Attachment.decode(data)
 
 
+def test_a_gid_is_xxh3_128_low_half_first_little_endian():
+    """XXH3-128 of the empty input is 0x99aa06d3014798d8_6001c324468d497f (xxHash's reference value): rmw_zenoh
+    copies its low 64 bits, then its high 64 bits, in the host's (little-endian) order."""
+    assert rmw.gid_of("") == bytes.fromhex("7f498d4624c30160" "d8984701d306aa99")
+
+
 def test_an_entitys_gid_is_16_bytes_and_its_own():
     a = rmw.gid_of("@ros2_lv/0/ab/0/1/MP/%/%/n/%t/std_msgs::msg::dds_::String_/x/::,10:,:,:,,")
     b = rmw.gid_of("@ros2_lv/0/ab/0/2/MP/%/%/n/%t/std_msgs::msg::dds_::String_/x/::,10:,:,:,,")
