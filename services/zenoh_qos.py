@@ -25,9 +25,10 @@ The ROS 2 topics of `controller --ros2` (rmw_zenoh's keys) publish as rmw_zenoh 
 publisher: Zenoh's defaults (`ROS2_KEEP_LAST`), below every control stream.
 
 `declare_publisher(session, key)` is how every process declares a publisher for a sharedctl key;
-`options("lease")` goes with `Session.get` (a reply travels with its query's QoS). A
-relay, a recorder's replay or a fault injector that re-publishes a key uses the same table, so a
-stream keeps its QoS through them. `DEFAULT` is Zenoh's own (the bench compares the two: the
+`options("lease")` goes with `Session.get` (a reply travels with its query's QoS). The fault relay
+re-publishes a key with the same table, so a stream keeps its QoS through it; `sharedctl replay`
+publishes every key with one QoS (`DEFAULT`), since streams of different priorities overtake one
+another and a replay keeps the recorded order. `DEFAULT` is Zenoh's own (the bench compares the two: the
 operator → torque latency with each, docs/performance.md).
 """
 from __future__ import annotations

@@ -17,6 +17,13 @@ from ..recording.json_schemas import MESSAGE_SCHEMAS
 from ..recording.views import DerivedViews
 
 
+#: the roles whose Heartbeat channels are advertised at start (the robot's and the controller's `ROLE`): a channel
+#: first advertised while a client is connected can meet that client's subscription before the server knows it
+#: (the server then refuses it as an unknown channel, and the client never hears the channel); other roles' channels
+#: are still made when their first heartbeat arrives
+HEARTBEAT_ROLES = ("robot", "controller")
+
+
 class LiveView:
     """One sample in, the records to publish out: the wire record, then the derived ones."""
 
@@ -25,11 +32,12 @@ class LiveView:
 
     def known_channels(self) -> list[tuple[str, str, dict]]:
         """(topic, kind, schema) of the channels known before any sample arrives: the robot's fixed keys
-        (state, ground truth, operator commands, events) and the derived views. Heartbeats (one key per
-        role) and undecoded payloads get their channel when the first arrives."""
+        (state, ground truth, operator commands, events, the heartbeats of `HEARTBEAT_ROLES`) and the derived
+        views. Other roles' heartbeats and undecoded payloads get their channel when the first arrives."""
         robot = self.views.robot
         fixed = [(keys.state_key(robot), "robot_state"), (keys.truth_key(robot), "ground_truth"),
                  (keys.operator_cmd_key(robot), "operator_command"), (keys.events_key(robot), "event")]
+        fixed += [(keys.alive_key(robot, role), "heartbeat") for role in HEARTBEAT_ROLES]
         return [(topic, kind, MESSAGE_SCHEMAS[kind]) for topic, kind in fixed] + self.views.channels()
 
     def convert(self, key: str, payload: bytes, log_ns: int, publish_ns: int | None = None) -> list[JsonRecord]:

@@ -110,7 +110,9 @@ def replay(path, session, speed: float = 1.0, stop: StopFlag | None = None) -> R
             publisher = publishers.get(key)
             if publisher is None:
                 try:
-                    publisher = publishers[key] = zenoh_qos.declare_publisher(session, key)   # the stream's QoS
+                    # one QoS for every key (Zenoh's default): streams of different priorities would overtake
+                    # one another, and a replay keeps the recorded order
+                    publisher = publishers[key] = zenoh_qos.declare_publisher(session, key, zenoh_qos.DEFAULT)
                 except Exception:  # noqa: BLE001 — a key Zenoh refuses (only possible for undecoded records)
                     report.skipped += 1
                     continue

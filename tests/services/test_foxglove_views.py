@@ -243,3 +243,11 @@ def test_the_command_refuses_another_host_without_allow_remote_before_serving(ca
     assert "not a loopback address" in capsys.readouterr().err
     assert cli.main(["foxglove", "--listen", "127.0.0.1:8765"]) == 2          # no Zenoh endpoint at all
     assert cli.main(["foxglove", "--connect", "tcp/192.168.1.2:7447"]) == 2    # Zenoh stays on loopback too
+
+
+def test_the_robots_and_the_controllers_heartbeats_are_advertised_before_any_arrives():
+    from sharedctl.services.controller.daemon import ROLE as CONTROLLER
+    from sharedctl.services.robot.process import ROLE as ROBOT_ROLE
+
+    known = {(topic, kind) for topic, kind, _ in LiveView(DerivedViews(ROBOT)).known_channels()}
+    assert {(keys.alive_key(ROBOT, role), "heartbeat") for role in (ROBOT_ROLE, CONTROLLER)} <= known
