@@ -121,7 +121,9 @@ def test_the_demo_publishes_odometry_of_its_robot_state_and_refuses_a_twist_whil
     ros2 = controller["ros2"]
     assert ros2["twists_received"] == 40 and ros2["twists_accepted"] == 0, ros2
     assert ros2["twists_refused"] == {"not_holder": 40} and controller["rejections"]["not_holder"] >= 40
-    assert ros2["odom_sent"] > 40 * 4 and ros2["authority_sent"] == ros2["odom_sent"]
+    # odometry and authority go out in the two periods after each RobotState: a controller stopped between them
+    # has sent the last state's odometry and not yet its authority
+    assert ros2["odom_sent"] > 40 * 4 and ros2["authority_sent"] in (ros2["odom_sent"], ros2["odom_sent"] - 1)
     assert summary["violations"] == 0 and summary["estops"] == 0
 
 
