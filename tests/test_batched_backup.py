@@ -8,7 +8,8 @@ robot's model (a hold deviation per block, shared brakes) also with a slack on t
 feedback: each robot its own). Values
 agree to rounding (REACH_TOL, FORCE_TOL, and λ: the regula falsi's chords are built from margins
 that may differ in the last bit); decisions — which robots the governor moves, which rows move —
-are identical.
+are identical. The omni robot's governor and speed-aware rows run twice: in numpy and compiled
+(sharedctl/batched/compiled_backup.py, where numba is installed).
 """
 from __future__ import annotations
 
@@ -21,6 +22,7 @@ import pytest
 
 from sharedctl.backup import BackupModel, BrakeBlock, govern, speed_aware_rows
 from sharedctl.batched import BatchProblem
+from sharedctl.batched import compiled_backup
 from sharedctl.batched.backup import BackupTable
 from sharedctl.batched.geometry import GroupTable
 from sharedctl.models import OmniRobot
@@ -42,14 +44,27 @@ def _loop(name):
     return loop
 
 
-def _case(name, which):
-    """(loop, backup model, its batched table, the distinct row of each stacked row of the scalar code)."""
+def _case(name, which, kernel="numpy"):
+    """(loop, backup model, its batched table, the distinct row of each stacked row of the scalar code);
+    `kernel`: the table's governor and speed-aware rows in numpy or compiled."""
     loop = _loop(name)
     backup = loop.backup if which == "omni" else OTHER[which]
     table = GroupTable.of(loop.feasible)
     stacked = np.concatenate(table.region_rows)
     assert np.array_equal(table.row_K[stacked], loop.feasible.row_matrix)
-    return loop, backup, BackupTable.of(backup, loop.feasible, table), stacked
+    batch = BackupTable.of(backup, loop.feasible, table, compiled=kernel == "compiled")
+    assert (batch.compiled is not None) == (kernel == "compiled")
+    return loop, backup, batch, stacked
+
+
+NUMBA = pytest.mark.skipif(not compiled_backup.available(), reason="numba is not installed (the montecarlo extra)")
+
+
+def _kernels(cases):
+    """Each case in numpy, and the omni robot's compiled too."""
+    out = [pytest.param(*case, "numpy", id=f"{case[0]}-{case[1]}-numpy") for case in cases]
+    return out + [pytest.param(*case, "compiled", marks=NUMBA, id=f"{case[0]}-{case[1]}-compiled")
+                  for case in cases if case[1] == "omni"]
 
 
 def _states(rng, N):
@@ -109,11 +124,11 @@ def test_fallback_acceleration_equals_the_scalar_fallback(name, which):
     np.testing.assert_allclose(got, expected, rtol=1e-13, atol=0)
 
 
-@pytest.mark.parametrize("name,which", GOVERNED)
-def test_the_governor_equals_the_scalar_governor_robot_by_robot(name, which):
+@pytest.mark.parametrize("name,which,kernel", _kernels(GOVERNED))
+def test_the_governor_equals_the_scalar_governor_robot_by_robot(name, which, kernel):
     """Each robot its own plant (three masses), its own λ; the command as asked where it is backup-safe
     and where not even u_g is, the regula falsi's point elsewhere."""
-    loop, backup, batch, _ = _case(name, which)
+    loop, backup, batch, _ = _case(name, which, kernel)
     rng = np.random.default_rng(14)
     N = 400
     q, v, _ = _states(rng, N)
@@ -134,9 +149,9 @@ def test_the_governor_equals_the_scalar_governor_robot_by_robot(name, which):
 
 
 @pytest.mark.parametrize("held", [False, True], ids=["state", "operator_command_held"])
-@pytest.mark.parametrize("name,which", CASES)
-def test_speed_aware_rows_equal_the_scalar_rows(name, which, held):
-    loop, backup, batch, stacked = _case(name, which)
+@pytest.mark.parametrize("name,which,kernel", _kernels(CASES))
+def test_speed_aware_rows_equal_the_scalar_rows(name, which, kernel, held):
+    loop, backup, batch, stacked = _case(name, which, kernel)
     q, v, a = _states(np.random.default_rng(15), 400)
     feasible, far = loop.feasible, loop.sharing.bands.b2
     x = (batch.row_K @ q.T) + batch.row_T
@@ -180,9 +195,9 @@ def test_reaches_and_margins_with_a_slack_equal_the_scalar_ones(name, which):
             backup.command_margin(loop.feasible, q[i], v[i], a[i], slack[:, i]), abs=REACH_TOL)
 
 
-@pytest.mark.parametrize("name,which", OMNI)
-def test_the_governor_with_a_slack_equals_the_scalar_governor_robot_by_robot(name, which):
-    loop, backup, batch, _ = _case(name, which)
+@pytest.mark.parametrize("name,which,kernel", _kernels(OMNI))
+def test_the_governor_with_a_slack_equals_the_scalar_governor_robot_by_robot(name, which, kernel):
+    loop, backup, batch, _ = _case(name, which, kernel)
     rng = np.random.default_rng(17)
     N = 400
     q, v, _ = _states(rng, N)
@@ -202,9 +217,9 @@ def test_the_governor_with_a_slack_equals_the_scalar_governor_robot_by_robot(nam
 
 
 @pytest.mark.parametrize("held", [False, True], ids=["state", "operator_command_held"])
-@pytest.mark.parametrize("name,which", OMNI)
-def test_speed_aware_rows_with_a_slack_equal_the_scalar_rows(name, which, held):
-    loop, backup, batch, stacked = _case(name, which)
+@pytest.mark.parametrize("name,which,kernel", _kernels(OMNI))
+def test_speed_aware_rows_with_a_slack_equal_the_scalar_rows(name, which, kernel, held):
+    loop, backup, batch, stacked = _case(name, which, kernel)
     rng = np.random.default_rng(18)
     q, v, a = _states(rng, 400)
     slack = _slacks(rng, 400)
@@ -224,3 +239,29 @@ def test_a_batch_refuses_robots_with_different_backup_models():
         with pytest.raises(ValueError, match="robot 1: backup differs"):
             BatchProblem.from_loops([loop, dataclasses.replace(loop, backup=other)], q0, v0)
     assert BatchProblem.from_loops([loop, dataclasses.replace(loop)], q0, v0).backup == loop.backup
+
+
+@NUMBA
+def test_the_compiled_governor_equals_the_numpy_governor_on_a_large_batch():
+    """4096 robots, slack or none: the same robots moved, the same λ (both probe the same 2⁻¹² grid)."""
+    loop, _, fast, _ = _case("paper_nonconvex", "omni", "compiled")
+    slow = dataclasses.replace(fast, compiled=None)
+    rng = np.random.default_rng(19)
+    N = 4096
+    q, v, _ = _states(rng, N)
+    u = rng.uniform(-60.0, 60.0, (N, 3))
+    theta = np.repeat(OmniRobot().theta[:, None], N, axis=1)
+    for slack in (None, list(_slacks(rng, N))):
+        sent, share = fast.govern(theta, q.T, v.T, u.T, DT, slack)
+        sent_np, share_np = slow.govern(theta, q.T, v.T, u.T, DT, slack)
+        np.testing.assert_array_equal(share, share_np)
+        np.testing.assert_allclose(sent, sent_np, rtol=0, atol=FORCE_TOL)
+        assert 0.1 < np.mean((share > 0.0) & (share < 1.0)) < 0.9
+
+
+def test_a_stop_without_a_compiled_form_keeps_the_numpy_governor():
+    loop = _loop("paper_convex")
+    table = GroupTable.of(loop.feasible)
+    assert BackupTable.of(PLAIN, loop.feasible, table).compiled is None
+    with pytest.raises(ValueError, match="no compiled governor"):
+        BackupTable.of(PLAIN, loop.feasible, table, compiled=True)

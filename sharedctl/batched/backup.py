@@ -21,12 +21,13 @@ block (`by_block`, as the omnidirectional robot's does) with arithmetic that run
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 from ..backup import _INSIDE, _LAMBDA_RESOLUTION, BackupModel, BrakeBlock   # the scalar module's constants
 from ..constraints import FeasibleSet
+from .compiled_backup import CompiledBackup
 from .geometry import GroupTable
 from .plant import acceleration, regressor_times
 
@@ -54,9 +55,13 @@ class BackupTable:
     region_rows: tuple         # per polytope: its rows among the distinct rows
     region_norms: np.ndarray   # (R, B) max_j |K_j,b| per polytope and block (backup._row_norms)
     row_norms: tuple           # per block, |K_j,b| of every distinct row (P, 1)
+    compiled: object = None    # compiled_backup.CompiledBackup: govern and speed_aware_rows robot by robot
 
     @staticmethod
-    def of(model: BackupModel, feasible: FeasibleSet, table: GroupTable) -> "BackupTable":
+    def of(model: BackupModel, feasible: FeasibleSet, table: GroupTable, compiled: bool | None = None) -> "BackupTable":
+        """The table of `model` on `feasible`'s rows; `compiled`: run govern and speed_aware_rows compiled
+        (compiled_backup.py) — None: wherever that has a form for the model and numba is installed;
+        True: required (ValueError where it has none); False: the numpy code below."""
         brakes = []
         for block in model.blocks:
             axes = list(block.axes)
@@ -68,7 +73,13 @@ class BackupTable:
                                  for r in feasible.regions])
         row_norms = tuple(np.array([[float(np.linalg.norm(k[list(b.axes)]))] for k in table.row_K])
                           for b in model.blocks)
-        return BackupTable(model, tuple(brakes), table.row_K, table.row_T, table.region_rows, region_norms, row_norms)
+        out = BackupTable(model, tuple(brakes), table.row_K, table.row_T, table.region_rows, region_norms, row_norms)
+        if compiled is False:
+            return out
+        fast = CompiledBackup.of(out)
+        if fast is None and compiled:
+            raise ValueError("no compiled governor for this model here (numba missing, or not the omni robot's stop)")
+        return replace(out, compiled=fast)
 
     # ----- reach: how far each row may still move towards its face (P, N) --------------------
     def state_reach(self, v: np.ndarray, slack=None, estimated: bool = True) -> np.ndarray:
@@ -230,6 +241,8 @@ class BackupTable:
         float or (N,) each, or None): returns (the command to send (n, N), λ (N,)). u where it is
         backup-safe; where not even u_g is, the one of u and u_g whose stop ends farther inside (λ = 0 or
         1); elsewhere u + λ(u_g − u) with λ from backup._root's regula falsi, every robot its own bracket."""
+        if self.compiled is not None:
+            return self.compiled.govern(theta, q, v, u, dt, slack)
         model = self.model
         delta = model.margin
         a = acceleration(theta, v, u, np.empty_like(u))
@@ -433,6 +446,8 @@ class BackupTable:
         the state's reach (with `a`, that of holding the acceleration a; with `slack`, of every velocity
         that close to v), kept _INSIDE inside; a row that stays at or below −`far` under its crude bound
         is left unmoved."""
+        if self.compiled is not None:
+            return self.compiled.speed_aware_rows(x, v, far, a, slack)
         held = np.zeros_like(v) if a is None else a
         crude = self._crude(self._block_bounds(v, held, 0.0, slack))
         near = (x < 0.0) & (x + crude > -far)
