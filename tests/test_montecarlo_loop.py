@@ -5,7 +5,8 @@ scalar `SharedController.step` on the scalar `Plant`, through the same model of 
 drives and watchdogs, written robot by robot. A batch whose robots carry different faults (CAN
 delays feedback- and command-ward, a hang, a kill) must follow each robot's scalar run to
 rounding, for every configuration; the batched plant must be `Plant.step`; and the loop must see
-what a missing brake does (a planted unsafe configuration).
+what a missing brake does (a planted unsafe configuration). The plant and the oracle run in numpy
+and compiled (where numba is installed); both are held to the scalar code.
 """
 from __future__ import annotations
 
@@ -17,8 +18,9 @@ from sharedctl.models import OmniRobot
 from sharedctl.models.omni_robot import OmniRobotParameters
 from sharedctl.services.robot.plant import Plant, RobotSimConfig
 from sharedctl.services.scenario_files import load
-from sharedctl.services.studies.montecarlo.loop import NEVER, FaultyLoop, LoopFaults
-from sharedctl.services.studies.montecarlo.plant import PlantBatch
+from sharedctl.services.studies.montecarlo.cases import random_regions
+from sharedctl.services.studies.montecarlo.loop import NEVER, FaultyLoop, LoopFaults, Oracle
+from sharedctl.services.studies.montecarlo.plant import PlantBatch, numba
 
 from .test_fault_envelope_properties import Envelope, FaultLoop
 
@@ -68,7 +70,12 @@ def test_each_robot_of_a_batch_follows_its_scalar_fault_loop_to_rounding(law):
     assert batch.estopped.tolist() == [False, False, False, True], "the 50-period hang trips the watchdogs"
 
 
-def test_the_batched_plant_is_the_robots_plant_to_rounding():
+KERNELS = [False, pytest.param(True, marks=pytest.mark.skipif(numba is None, reason="numba is not installed "
+                                                                 "(the montecarlo extra)"))]
+
+
+@pytest.mark.parametrize("compiled", KERNELS, ids=["numpy", "compiled"])
+def test_the_batched_plant_is_the_robots_plant_to_rounding(compiled):
     rng = np.random.default_rng(7)
     config = RobotSimConfig()
     N = 64
@@ -79,13 +86,31 @@ def test_the_batched_plant_is_the_robots_plant_to_rounding():
     v[:, :4] *= 40.0                                          # some wheels beyond the speed limit
     tau = rng.uniform(-80, 80, (3, N))                       # beyond the torque limit too
     disarmed = rng.random((3, N)) < 0.3
-    q1, v1 = PlantBatch(robots[0], theta, config).step(q, v, tau, disarmed, 1e-3)
+    batch = PlantBatch(robots[0], theta, config, compiled=compiled)
+    assert batch.compiled == compiled
+    q1, v1 = batch.step(q, v, tau, disarmed, 1e-3)
     for i, robot in enumerate(robots):
         plant = Plant(robot, config)
         state = plant.step(plant.initial_state(q[:, i], v[:, i]), tuple(tau[:, i]), 1e-3,
                            plant.brake_torques(disarmed[:, i]))
         np.testing.assert_allclose(q1[:, i], state.q, rtol=1e-13, atol=1e-13)
         np.testing.assert_allclose(v1[:, i], state.qd, rtol=1e-13, atol=1e-12)
+
+
+@pytest.mark.parametrize("compiled", KERNELS, ids=["numpy", "compiled"])
+def test_the_oracle_is_the_distance_to_the_nearest_face_of_the_best_polytope(compiled):
+    rng = np.random.default_rng(8)
+    for _ in range(20):
+        regions = random_regions(rng, ("convex", "union")[_ % 2])
+        oracle = Oracle(regions, compiled=compiled)
+        q = rng.uniform(-3.0, 3.0, (3, 200))
+        q[:, 0] = np.nan
+        got = oracle.margin(q)
+        assert np.isnan(got[0])
+        for i in range(1, 200):
+            best = max(min(-(np.dot(k, q[:, i]) + t) / np.linalg.norm(k) for k, t in zip(K, T)) for K, T in regions)
+            assert got[i] == pytest.approx(best, abs=1e-12)
+        assert (got[1:] > 0).any() and (got[1:] < 0).any()
 
 
 def test_the_wheel_maps_batch_forms_are_its_scalar_forms():

@@ -37,7 +37,7 @@ from sharedctl.human import intent as intent_of
 from sharedctl.services.controller.operator_input import DEFAULT_TIMEOUT
 from sharedctl.services.robot.plant import RobotSimConfig
 
-from .plant import DEFAULT_CONFIG, PlantBatch
+from .plant import DEFAULT_CONFIG, PlantBatch, numba
 
 PERIOD = 0.002            # s, the daemon's control period
 PHYSICS_SUBSTEPS = 2      # RK4 steps of the robot's plant per period (its 1 kHz)
@@ -94,16 +94,27 @@ class LoopResult:
 
 class Oracle:
     """Distances to the faces of the polytopes from their rows, normalised: max over polytopes of the
-    min over rows of −(k q + t), > 0 inside the union."""
+    min over rows of −(k q + t), > 0 inside the union. `margin` runs compiled where numba is installed
+    (`compiled`: None, True, False as in PlantBatch); a NaN in q gives NaN either way."""
 
-    def __init__(self, regions):
+    def __init__(self, regions, compiled: bool | None = None):
         self.rows = []
         for K, T in regions:
             K, T = np.asarray(K, float), np.asarray(T, float)
             norms = np.linalg.norm(K, axis=1)
             self.rows.append((K / norms[:, None], (T / norms)[:, None]))
+        if compiled and numba is None:
+            raise ValueError("a compiled oracle needs numba (the montecarlo extra)")
+        self.compiled = numba is not None if compiled is None else bool(compiled)
+        self._K = np.ascontiguousarray(np.vstack([K for K, _ in self.rows]))
+        self._T = np.concatenate([T[:, 0] for _, T in self.rows])
+        self._starts = np.cumsum([0] + [K.shape[0] for K, _ in self.rows])
 
     def margin(self, q: np.ndarray) -> np.ndarray:
+        if self.compiled:
+            out = np.empty(q.shape[1])
+            _margins(self._K, self._T, self._starts, np.ascontiguousarray(q, float), out)
+            return out
         best = None
         for K, T in self.rows:
             m = np.min(-(K @ q + T), axis=0)
@@ -303,3 +314,31 @@ class FaultyLoop:
         return LoopResult(self.min_margin.copy(), self.min_margin_t.copy(), self.estopped.copy(), self.acted.copy(),
                           self.nonfinite.copy(), np.linalg.norm(self.v, axis=0), self.q.copy(), self.v.copy(),
                           self.approach_at_fault.copy())
+
+
+def _oracle_margins(K, T, starts, q, out):
+    """Oracle.margin for every robot (columns of q), into `out`: max over polytopes (rows
+    starts[r]:starts[r + 1]) of the min over rows of −(k q + t), NaN where q has one."""
+    for i in range(q.shape[1]):
+        best = -np.inf
+        for r in range(starts.shape[0] - 1):
+            least = np.inf
+            for j in range(starts[r], starts[r + 1]):
+                dot = 0.0
+                for c in range(K.shape[1]):
+                    dot += K[j, c] * q[c, i]
+                value = -(dot + T[j])
+                if value != value:
+                    least = value
+                    break
+                if value < least:
+                    least = value
+            if least != least:
+                best = least
+                break
+            if least > best:
+                best = least
+        out[i] = best
+
+
+_margins = numba.njit(cache=True)(_oracle_margins) if numba is not None else _oracle_margins
