@@ -24,7 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..backup import _INSIDE, _LAMBDA_RESOLUTION
-from ..models.omni_robot_stop import OmniHoldDeviation
+from ..models.omni_robot_stop import OmniHoldDeviation, hold_deviation_bounds
 
 try:                                    # an optional dependency: the `montecarlo` extra
     import numba
@@ -170,19 +170,13 @@ def _fallback_decelerations(p, s0, s1):
     return d0, d1
 
 
+_deviation_bounds = _jit(hold_deviation_bounds)
+
+
 @_jit
 def _deviation(p, s, w, alpha, beta, T):
     """OmniHoldDeviation.by_block((s, w), (α, β), T): (x_t, x_ψ, y_t, y_ψ)."""
-    rho = p[_RHO]
-    T2 = T * T
-    T3 = T2 * T
-    phi = w * T + 0.5 * beta * T2
-    G = alpha + rho * w * s
-    y = s * (0.5 * rho * rho * phi * phi + 0.5 * rho * beta * T2) + G * (
-        rho * T * phi + (1.0 - rho) * (0.5 * w * T2 + beta * T3 / 6.0))
-    phi2 = w * w * T3 / 3.0 + w * beta * T2 * T2 / 4.0 + beta * beta * T3 * T2 / 20.0
-    x = s * (0.5 * rho * rho * phi2 + rho * beta * T3 / 6.0) + G * (
-        rho * (w * T3 / 3.0 + beta * T2 * T2 / 8.0) + (1.0 - rho) * (w * T3 / 6.0 + beta * T2 * T2 / 24.0))
+    x, y = _deviation_bounds(p[_RHO], s, w, alpha, beta, T)
     return x, 0.0 * x, y, 0.0 * y
 
 

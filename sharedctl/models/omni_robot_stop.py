@@ -84,16 +84,7 @@ class OmniHoldDeviation:
     def by_block(self, speeds, accelerations, duration):
         s, w = speeds
         alpha, beta = accelerations
-        rho, T = self.wheel_share, duration
-        T2 = T * T
-        T3 = T2 * T
-        phi = w * T + 0.5 * beta * T2
-        G = alpha + rho * w * s
-        y = s * (0.5 * rho * rho * phi * phi + 0.5 * rho * beta * T2) + G * (
-            rho * T * phi + (1.0 - rho) * (0.5 * w * T2 + beta * T3 / 6.0))
-        phi2 = w * w * T3 / 3.0 + w * beta * T2 * T2 / 4.0 + beta * beta * T3 * T2 / 20.0     # ∫₀ᵀ Φ²
-        x = s * (0.5 * rho * rho * phi2 + rho * beta * T3 / 6.0) + G * (
-            rho * (w * T3 / 3.0 + beta * T2 * T2 / 8.0) + (1.0 - rho) * (w * T3 / 6.0 + beta * T2 * T2 / 24.0))
+        x, y = hold_deviation_bounds(self.wheel_share, s, w, alpha, beta, duration)
         return (x, 0.0 * x), (y, 0.0 * y)
 
     def acceleration_spread(self, speeds, slacks):
@@ -104,6 +95,22 @@ class OmniHoldDeviation:
         e, f = slacks
         spread = self.wheel_share * (f * (s + e) + w * e)
         return spread, 0.0 * spread
+
+
+def hold_deviation_bounds(rho, s, w, alpha, beta, T):
+    """(x(T), y(T)) of `OmniHoldDeviation` for ρ, translation and yaw speeds s, w, acceleration bounds α,
+    β: plain arithmetic, so the same function runs on floats, on arrays and compiled
+    (sharedctl/batched/compiled_backup.py)."""
+    T2 = T * T
+    T3 = T2 * T
+    phi = w * T + 0.5 * beta * T2
+    G = alpha + rho * w * s
+    y = s * (0.5 * rho * rho * phi * phi + 0.5 * rho * beta * T2) + G * (
+        rho * T * phi + (1.0 - rho) * (0.5 * w * T2 + beta * T3 / 6.0))
+    phi2 = w * w * T3 / 3.0 + w * beta * T2 * T2 / 4.0 + beta * beta * T3 * T2 / 20.0     # ∫₀ᵀ Φ²
+    x = s * (0.5 * rho * rho * phi2 + rho * beta * T3 / 6.0) + G * (
+        rho * (w * T3 / 3.0 + beta * T2 * T2 / 8.0) + (1.0 - rho) * (w * T3 / 6.0 + beta * T2 * T2 / 24.0))
+    return x, y
 
 
 def energy_weights(bounds: OmniStopBounds) -> tuple[tuple[float, float], tuple[float, float]]:

@@ -117,6 +117,8 @@ def _derivative(k, m1, m3, a, q2, v0, v1, v2, d0, d1, d2, b0, b1, b2):
 def _drive(k, tau, omega):
     """PlantBatch.drive_torque for one wheel."""
     limit = k[4]
+    if tau != tau:                                     # np.clip keeps a NaN
+        return tau
     out = min(max(tau, -limit), limit)
     if abs(omega) >= k[5] and out * omega > 0:
         return 0.0
