@@ -465,7 +465,7 @@ class Governed:
 
 
 def govern(backup: BackupModel, model, feasible, q: np.ndarray, v: np.ndarray, u: np.ndarray,
-           dt: float, slack=None, offset=None) -> Governed:
+           dt: float, slack=None, offset=None, hint: float = 0.0) -> Governed:
     """The backup-safe command closest to u on the segment u → u_g; with `slack` and `offset` (per
     block), a command backup-safe for every velocity within the slack of v and every position within
     the offset of q (an estimate: output feedback, `uncertain_prediction`).
@@ -476,7 +476,9 @@ def govern(backup: BackupModel, model, feasible, q: np.ndarray, v: np.ndarray, u
     near a face for the speed are computed exactly) is found at λ = 0 and, when u fails, at λ = 1;
     when u fails and u_g passes, its root is bracketed by regula falsi with
     the Illinois rule (`_root`): the acceleration is affine in the command, so a(λ) = a_u + λ(a_g − a_u)
-    costs no model call; the safe end of the bracket is sent."""
+    costs no model call; the safe end of the bracket is sent. `hint`: the share the governor found
+    the period before (0 or 1: none); the search tries it and its neighbour on the grid first, which
+    settles a share that has not moved in two probes (`_root`)."""
     q, v, u = np.asarray(q, float), np.asarray(v, float), np.asarray(u, float)
     q_list, v_list, slack, offset = q.tolist(), v.tolist(), _slack(slack, backup), _slack(offset)
     a_u = model.acceleration(q, v, u).tolist()
@@ -499,7 +501,7 @@ def govern(backup: BackupModel, model, feasible, q: np.ndarray, v: np.ndarray, u
                 >= _next_margin(backup, feasible, q, v, a_g, dt, slack)):
             return Governed(u, 0.0, False)
         return Governed(model.inverse_dynamics(q, v, a_g), 1.0, False)
-    share = _root(probe.along(a_u, g_list), m_u, m_g, backup)
+    share = _root(probe.along(a_u, g_list), m_u, m_g, backup, hint)
     u_g = model.inverse_dynamics(q, v, a_g)
     return Governed(u + share * (u_g - u), share, True)
 
@@ -553,18 +555,35 @@ def _next_margin(backup: BackupModel, feasible, q: np.ndarray, v: np.ndarray, a,
     return backup.state_margin(feasible, q + v * dt + 0.5 * a * dt * dt, v + a * dt, slack)
 
 
-def _root(merit, m_lo: float, m_hi: float, backup: BackupModel) -> float:
+def _root(merit, m_lo: float, m_hi: float, backup: BackupModel, hint: float = 0.0) -> float:
     """The least λ ∈ (0, 1] with merit(λ) ≥ 0, from above: regula falsi on the bracket [lo, hi]
     (merit(lo) < 0 ≤ merit(hi)) with the Illinois rule (the end kept twice has its merit halved
     for the next chord), at most `backup.iterations` probes, until hi − lo ≤ 2⁻¹². A chord point
     that is not strictly inside the bracket (a merit of −inf: no polytope contains the state) is
     replaced by the midpoint, and every probe is rounded to the grid (`_on_grid`). Returns hi: it
     always passes. On the bench's adversarial-wall replay it takes 9.7 probes on average where
-    bisection takes 12, and its λ is within 0.0061 of a 30-halving bisection's (within 0.00025 in
-    99 % of the searches). The batched governor
-    (sharedctl/batched/backup.py) runs the same arithmetic per robot."""
-    lo, hi, f_lo, f_hi, kept = 0.0, 1.0, m_lo, m_hi, 0
-    for _ in range(backup.iterations):
+    bisection takes 12 (5.3 told the last period's λ), and its λ is within 0.0061 of a 30-halving
+    bisection's (within 0.00025 in 99 % of the searches). The batched governor
+    (sharedctl/batched/backup.py) runs the same arithmetic per robot.
+
+    With a `hint` in (0, 1) (the last period's λ) the bracket is first narrowed by two probes: the
+    hint on the grid, then its neighbour towards the other end (below it when it passes, above when
+    it fails), both counted in the `backup.iterations` probes. A λ that has not moved since the last
+    period is then settled; one that moved starts the chords from a bracket one of whose ends is a
+    grid step from the hint (docs/control.md §10, the warm start: every end is still a probe's
+    verdict, so what is sent still passes)."""
+    lo, hi, f_lo, f_hi, kept, probes = 0.0, 1.0, m_lo, m_hi, 0, backup.iterations
+    if 0.0 < hint < 1.0:
+        lam = _on_grid(hint, lo, hi)
+        m = merit(lam)
+        probes -= 1
+        lo, f_lo, hi, f_hi = (lo, f_lo, lam, m) if m >= 0.0 else (lam, m, hi, f_hi)
+        if hi - lo > _LAMBDA_RESOLUTION:
+            lam = hi - _LAMBDA_RESOLUTION if m >= 0.0 else lo + _LAMBDA_RESOLUTION
+            m = merit(lam)
+            probes -= 1
+            lo, f_lo, hi, f_hi = (lo, f_lo, lam, m) if m >= 0.0 else (lam, m, hi, f_hi)
+    for _ in range(probes):
         if hi - lo <= _LAMBDA_RESOLUTION:
             break
         lam = (lo * f_hi - hi * f_lo) / (f_hi - f_lo)

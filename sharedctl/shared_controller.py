@@ -46,6 +46,7 @@ class ControllerState:
     law_state: np.ndarray = field(default_factory=lambda: np.zeros(0))
     observer: np.ndarray = field(default_factory=lambda: np.zeros(0))
     sent: tuple = ()       # the last commands u_s, oldest first (the predictor's input history)
+    backup_share: float = 0.0   # the governor's last λ: where its next search starts (backup._root)
 
 
 @dataclass(frozen=True)
@@ -182,10 +183,12 @@ class SharedController:
                 u_f = self.recovery_force(grp, q, v_used)
         u_s = shared_input(decision, u_h, u_f)
         backup_share = 0.0
+        last_share = state.backup_share
         if backup is not None and decision.authority is not Authority.HUMAN:
             q_b, v_b, slack, offset = judged
-            governed = govern(backup, model, feasible, q_b, v_b, u_s, dt, slack, offset)
+            governed = govern(backup, model, feasible, q_b, v_b, u_s, dt, slack, offset, hint=last_share)
             u_s, backup_share = governed.u, governed.share
+            last_share = backup_share
             if backup_share > 0.0:
                 theta_next = theta_hat      # the law's update assumes u_f acts; it did not
         if out is not None and law_state.size:
@@ -201,7 +204,8 @@ class SharedController:
             backup_share=backup_share,
         )
         sent = (state.sent + (u_s,))[-HISTORY:]
-        next_state = ControllerState(arbiter, theta_next, law_role, law_next, observer_next, sent)   # every field
+        next_state = ControllerState(arbiter, theta_next, law_role, law_next, observer_next, sent,   # every field
+                                     last_share)
         if not (all_finite(u_s.tolist()) and all_finite(theta_next.tolist()) and all_finite(law_next.tolist())):
             raise NonFiniteCommand("the shared controller produced a non-finite value")
         return next_state, output

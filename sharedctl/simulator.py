@@ -226,7 +226,9 @@ def simulate(loop: ClosedLoop, q0, v0, duration: float, dt: float) -> Trace:
         return speed_aware_rows(backup, feasible, feasible.row_values(q_, v_), v_, loop.sharing.bands.b2, held,
                                 slack)
 
-    held_share = [0.0]          # the governor's λ of the current step (`rates` with want_signals finds it)
+    # the governor's λ of the current step (`rates` with want_signals finds it; the last one found starts
+    # the next search, as in the sampled loop: backup._root)
+    held_share = [0.0]
 
     def rates(t, q_, v_, th_, s_, o_, decision, want_signals=False):
         desired = human.desired(t)
@@ -255,7 +257,8 @@ def simulate(loop: ClosedLoop, q0, v0, duration: float, dt: float) -> Trace:
             # held over the stages (the fallback u_g at each stage's own state), as the sampled loop
             # holds one governed command per period
             if want_signals:
-                held_share[0] = govern(backup, model, feasible, q_, v_meas, u_s, dt, observed).share
+                held_share[0] = govern(backup, model, feasible, q_, v_meas, u_s, dt, observed,
+                                       hint=held_share[0]).share
             share = held_share[0]
             if share > 0.0:
                 u_g = model.inverse_dynamics(q_, v_meas, backup.fallback_acceleration(v_meas))

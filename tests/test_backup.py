@@ -21,7 +21,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from sharedctl.backup import BrakeBlock, govern, omni_backup
+from sharedctl.backup import _LAMBDA_RESOLUTION, BrakeBlock, _root, govern, omni_backup
 from sharedctl.constraints import FeasibleSet, Polytope
 from sharedctl.models import OmniRobot
 from sharedctl.services.robot.plant import Plant, RobotSimConfig
@@ -243,6 +243,81 @@ def test_govern_changes_the_command_no_more_than_needed(x, y, speed, heading, pu
     assert out.share - hi <= 0.005
 
 
+R = _LAMBDA_RESOLUTION
+
+
+def _probed(merit):
+    """merit, with the λ it was asked at kept in `.at`."""
+    def counted(lam):
+        counted.at.append(lam)
+        return merit(lam)
+    counted.at = []
+    return counted
+
+
+@settings(max_examples=300, deadline=None, derandomize=True)
+@given(root=st.floats(R, 1.0), slope=st.floats(1e-3, 1e3), bend=st.floats(-0.9, 0.9), hint=st.floats(-0.5, 1.5))
+def test_with_any_hint_the_search_ends_at_the_least_passing_grid_point_of_a_monotone_merit(root, slope, bend, hint):
+    """docs/control.md §10, the warm start: on an increasing merit every search that closes its
+    bracket ends at the least grid point that passes, cold or told any λ; a hint at that point
+    settles it in two probes."""
+    def merit(lam):       # increasing, its sign changes at `root`, bent so that a chord misses
+        d = lam - root
+        return slope * (d + bend * abs(d) * d)
+
+    least = math.ceil(root / R) * R
+    cold = _root(merit, merit(0.0), merit(1.0), BACKUP)
+    warm = _probed(merit)
+    assert cold == least and _root(warm, merit(0.0), merit(1.0), BACKUP, hint) == least
+    assert all(round(lam / R) * R == lam for lam in warm.at)              # every probe on the grid
+    assert len(warm.at) <= BACKUP.iterations
+    told = _probed(merit)
+    if least < 1.0:
+        assert _root(told, merit(0.0), merit(1.0), BACKUP, least) == least
+        assert len(told.at) == (1 if least == R else 2)        # at λ = 2⁻¹² the bracket [0, λ] is closed
+
+
+@settings(max_examples=300, deadline=None, derandomize=True)
+@given(values=st.lists(st.floats(-1.0, 1.0), min_size=2, max_size=40), hint=st.floats(0.0, 1.0))
+def test_with_any_hint_the_search_sends_a_probe_that_passed_whatever_the_merit(values, hint):
+    """On any merit (here a random one, constant on bins of λ) the warm search returns 1 or a probed
+    λ that passed; where its bracket closed, the grid point below it failed."""
+    def merit(lam):
+        return values[min(int(lam * len(values)), len(values) - 1)]
+
+    lo_value = min(values[0], -1e-3)
+    merit_of = _probed(lambda lam: lo_value if lam == 0.0 else 1.0 if lam == 1.0 else merit(lam))
+    hi = _root(merit_of, lo_value, 1.0, BACKUP, hint)
+    verdict = {lam: merit(lam) for lam in merit_of.at}
+    assert hi == 1.0 or (hi in verdict and verdict[hi] >= 0.0)
+    if hi - R in verdict:
+        assert verdict[hi - R] < 0.0
+
+
+@settings(max_examples=60, deadline=None, derandomize=True)
+@given(x=st.floats(0.2, 0.9), y=st.floats(-0.8, 0.8), speed=st.floats(0.5, 2.5), heading=st.floats(-0.8, 0.8),
+       push=st.floats(50.0, 400.0), hint=st.floats(0.0, 1.0))
+def test_govern_told_any_last_share_sends_a_backup_safe_command(x, y, speed, heading, push, hint):
+    """The governor told any λ (the last period's, in the sampled loop) sends what the cold one may:
+    the command when it passes, else a command that passes, within 0.005 of the least λ (the oracle
+    of test_govern_changes_the_command_no_more_than_needed)."""
+    q = np.array([x, y, 0.0])
+    v = np.array([speed * math.cos(heading), speed * math.sin(heading), 0.0])
+    u = np.array([push, 0.0, 0.0])
+    cold, warm = govern(BACKUP, MODEL, BOX, q, v, u, 0.002), govern(BACKUP, MODEL, BOX, q, v, u, 0.002, hint=hint)
+    assert warm.feasible == cold.feasible and (warm.share == 0.0) == (cold.share == 0.0)
+    if warm.share == 0.0 or not warm.feasible:
+        np.testing.assert_array_equal(warm.u, cold.u)
+        return
+    assert _passes(q, v, warm.u)
+    u_g = MODEL.inverse_dynamics(q, v, BACKUP.fallback_acceleration(v))
+    lo, hi = 0.0, 1.0
+    for _ in range(30):
+        mid = 0.5 * (lo + hi)
+        lo, hi = (lo, mid) if _passes(q, v, u + mid * (u_g - u)) else (mid, hi)
+    assert warm.share - hi <= 0.005
+
+
 def test_govern_leaves_a_state_outside_the_envelope_to_a_law_braking_harder_than_the_fallback():
     """0.05 m from the face at 3 m/s no stop ends inside: a law braking at 900 N is sent unchanged."""
     q, v, u = np.array([0.95, 0.0, 0.0]), np.array([3.0, 0.0, 0.0]), np.array([-900.0, 0.0, 0.0])
@@ -432,8 +507,8 @@ def test_the_simulator_searches_the_governor_s_share_once_a_step_and_holds_it_ov
     calls, sent = [], []
     real = sim.govern
 
-    def counted(*args):
-        out = real(*args)
+    def counted(*args, **kw):
+        out = real(*args, **kw)
         calls.append(args[4].copy())
         sent.append(out.u)
         return out

@@ -67,6 +67,15 @@ def _kernels(cases):
                   for case in cases if case[1] == "omni"]
 
 
+def _hints(rng, shares):
+    """Each robot's last λ for the governor's warm start (backup._root): its λ now, a few grid steps
+    from it, anywhere in [0, 1], or none."""
+    N = shares.size
+    kind = rng.integers(0, 4, N)
+    near = np.clip(shares + rng.integers(-3, 4, N) * 2.0 ** -12, 0.0, 1.0)
+    return np.select([kind == 0, kind == 1, kind == 2], [shares, near, rng.uniform(0.0, 1.0, N)], 0.0)
+
+
 def _states(rng, N):
     """(q, v, w) (N, 3): positions around and outside the sets, velocities and a second vector (an
     acceleration, in m/s²) whose translation and yaw blocks are at rest, crawling (below the braking
@@ -136,12 +145,16 @@ def test_the_governor_equals_the_scalar_governor_robot_by_robot(name, which, ker
     plants = [OmniRobot(OmniRobotParameters(mass=m)) for m in (6.0, 9.85, 15.0)]
     plant_of = rng.integers(0, len(plants), N)
     theta = np.stack([plants[p].theta for p in plant_of], axis=1)
-    sent, share = batch.govern(theta, q.T, v.T, u.T, DT)
-    expected = [govern(backup, plants[plant_of[i]], loop.feasible, q[i], v[i], u[i], DT) for i in range(N)]
-    shares = np.array([g.share for g in expected])
-    np.testing.assert_array_equal(share == 0.0, shares == 0.0)
-    np.testing.assert_allclose(share, shares, rtol=1e-12, atol=0)
-    np.testing.assert_allclose(sent, np.stack([g.u for g in expected], axis=1), rtol=0, atol=FORCE_TOL)
+    hint = None
+    for _ in range(2):       # cold, then told the last λ (near or at the cold one, anywhere, none)
+        sent, share = batch.govern(theta, q.T, v.T, u.T, DT, hint=hint)
+        expected = [govern(backup, plants[plant_of[i]], loop.feasible, q[i], v[i], u[i], DT,
+                           hint=0.0 if hint is None else hint[i]) for i in range(N)]
+        shares = np.array([g.share for g in expected])
+        np.testing.assert_array_equal(share == 0.0, shares == 0.0)
+        np.testing.assert_allclose(share, shares, rtol=1e-12, atol=0)
+        np.testing.assert_allclose(sent, np.stack([g.u for g in expected], axis=1), rtol=0, atol=FORCE_TOL)
+        hint = _hints(rng, shares)
     kept = sum(g.share == 0.0 and g.feasible for g in expected)
     moved = sum(g.share > 0.0 for g in expected)
     hopeless = sum(not g.feasible for g in expected)
@@ -205,12 +218,16 @@ def test_the_governor_with_a_slack_equals_the_scalar_governor_robot_by_robot(nam
     u = rng.uniform(-60.0, 60.0, (N, 3))
     model = OmniRobot()
     theta = np.repeat(model.theta[:, None], N, axis=1)
-    sent, share = batch.govern(theta, q.T, v.T, u.T, DT, list(slack))
-    expected = [govern(backup, model, loop.feasible, q[i], v[i], u[i], DT, slack[:, i]) for i in range(N)]
-    shares = np.array([g.share for g in expected])
-    np.testing.assert_array_equal(share == 0.0, shares == 0.0)
-    np.testing.assert_allclose(share, shares, rtol=1e-12, atol=0)
-    np.testing.assert_allclose(sent, np.stack([g.u for g in expected], axis=1), rtol=0, atol=FORCE_TOL)
+    hint = None
+    for _ in range(2):
+        sent, share = batch.govern(theta, q.T, v.T, u.T, DT, list(slack), hint)
+        expected = [govern(backup, model, loop.feasible, q[i], v[i], u[i], DT, slack[:, i],
+                           hint=0.0 if hint is None else hint[i]) for i in range(N)]
+        shares = np.array([g.share for g in expected])
+        np.testing.assert_array_equal(share == 0.0, shares == 0.0)
+        np.testing.assert_allclose(share, shares, rtol=1e-12, atol=0)
+        np.testing.assert_allclose(sent, np.stack([g.u for g in expected], axis=1), rtol=0, atol=FORCE_TOL)
+        hint = _hints(rng, shares)
     moved = sum(g.share > 0.0 and g.feasible for g in expected)
     hopeless = sum(not g.feasible for g in expected)
     assert min(moved, hopeless) >= 5, (moved, hopeless)
@@ -252,11 +269,14 @@ def test_the_compiled_governor_equals_the_numpy_governor_on_a_large_batch():
     u = rng.uniform(-60.0, 60.0, (N, 3))
     theta = np.repeat(OmniRobot().theta[:, None], N, axis=1)
     for slack in (None, list(_slacks(rng, N))):
-        sent, share = fast.govern(theta, q.T, v.T, u.T, DT, slack)
-        sent_np, share_np = slow.govern(theta, q.T, v.T, u.T, DT, slack)
-        np.testing.assert_array_equal(share, share_np)
-        np.testing.assert_allclose(sent, sent_np, rtol=0, atol=FORCE_TOL)
-        assert 0.1 < np.mean((share > 0.0) & (share < 1.0)) < 0.9
+        hint = None
+        for _ in range(2):
+            sent, share = fast.govern(theta, q.T, v.T, u.T, DT, slack, hint)
+            sent_np, share_np = slow.govern(theta, q.T, v.T, u.T, DT, slack, hint)
+            np.testing.assert_array_equal(share, share_np)
+            np.testing.assert_allclose(sent, sent_np, rtol=0, atol=FORCE_TOL)
+            assert 0.1 < np.mean((share > 0.0) & (share < 1.0)) < 0.9
+            hint = _hints(rng, share)
 
 
 def test_a_stop_without_a_compiled_form_keeps_the_numpy_governor():

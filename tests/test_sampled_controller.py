@@ -84,3 +84,45 @@ def test_the_reference_reported_under_operator_authority_is_its_own_samples(name
         np.testing.assert_array_equal(out.q_r, fresh.q_r)
         checked += 1
     assert checked >= 50
+
+
+def _governed_run(monkeypatch, warm: bool, seconds: float = 4.0):
+    """The adversarial wall sampled at 500 Hz with every governor call and root-search probe counted;
+    `warm=False` tells every search nothing (the cold search)."""
+    import sharedctl.backup as backup_module
+    import sharedctl.shared_controller as shared_module
+
+    calls, probes = [], [0]
+    real_govern, real_root = shared_module.govern, backup_module._root
+
+    def govern(*args, hint=0.0):
+        out = real_govern(*args, hint=hint if warm else 0.0)
+        calls.append((hint, out.share))
+        return out
+
+    def root(merit, m_lo, m_hi, backup, hint=0.0):
+        def counted(lam):
+            probes[0] += 1
+            return merit(lam)
+        return real_root(counted, m_lo, m_hi, backup, hint)
+
+    monkeypatch.setattr(shared_module, "govern", govern)
+    monkeypatch.setattr(backup_module, "_root", root)
+    loop, q0, v0 = load("adversarial_wall").closed_loop("ce")
+    trace = simulate_sampled(loop, q0, v0, seconds, PERIOD)
+    return trace, calls, probes[0]
+
+
+def test_the_sampled_loop_starts_each_governor_search_from_the_last_share(monkeypatch):
+    """SharedController keeps the governor's λ in its state and tells the next search (docs/control.md
+    §10, the warm start): pressed against the adversarial wall every call is told the λ the call before
+    it returned, the run keeps the set, and its searches take at most 60 % of the cold searches' probes."""
+    warm, calls, warm_probes = _governed_run(monkeypatch, True)
+    monkeypatch.undo()
+    cold, cold_calls, cold_probes = _governed_run(monkeypatch, False)
+    searched = sum(0.0 < share < 1.0 for _, share in calls)
+    assert searched > 100, "the governor hardly searched: the case would test nothing"
+    assert calls[0][0] == 0.0 and all(calls[k][0] == calls[k - 1][1] for k in range(1, len(calls)))
+    assert sum(0.0 < hint < 1.0 for hint, _ in calls) > 100
+    assert warm.inside.all() and cold.inside.all()
+    assert warm_probes <= 0.6 * cold_probes, (warm_probes, cold_probes)

@@ -236,13 +236,15 @@ class BackupTable:
                 a[brake.axes] = np.where(speed <= 0.0, 0.0, -decel * part / speed)
         return a
 
-    def govern(self, theta: np.ndarray, q: np.ndarray, v: np.ndarray, u: np.ndarray, dt: float, slack=None):
+    def govern(self, theta: np.ndarray, q: np.ndarray, v: np.ndarray, u: np.ndarray, dt: float, slack=None,
+               hint=None):
         """backup.govern for every robot (true parameters θ (n_θ, N), q, v, u (n, N); `slack` per block, a
-        float or (N,) each, or None): returns (the command to send (n, N), λ (N,)). u where it is
-        backup-safe; where not even u_g is, the one of u and u_g whose stop ends farther inside (λ = 0 or
-        1); elsewhere u + λ(u_g − u) with λ from backup._root's regula falsi, every robot its own bracket."""
+        float or (N,) each, or None; `hint` (N,) or None: each robot's last λ): returns (the command to
+        send (n, N), λ (N,)). u where it is backup-safe; where not even u_g is, the one of u and u_g
+        whose stop ends farther inside (λ = 0 or 1); elsewhere u + λ(u_g − u) with λ from backup._root's
+        regula falsi, every robot its own bracket."""
         if self.compiled is not None:
-            return self.compiled.govern(theta, q, v, u, dt, slack)
+            return self.compiled.govern(theta, q, v, u, dt, slack, hint)
         model = self.model
         delta = model.margin
         a = acceleration(theta, v, u, np.empty_like(u))
@@ -279,7 +281,8 @@ class BackupTable:
             return sent, share
         theta, q, v, u, x, a, a_g = (arr[:, keep] for arr in (theta, q, v, u, x, a, a_g))
         slack = _take(slack, keep)
-        hi = self._root(q, v, x, a, a_g, m_u[keep], m_g[keep], dt, slack)
+        hi = self._root(q, v, x, a, a_g, m_u[keep], m_g[keep], dt, slack,
+                        None if hint is None else np.asarray(hint, float)[cols])
         u_g = regressor_times(v, v, a_g, theta)                        # model.inverse_dynamics
         sent[:, cols] = u + hi * (u_g - u)
         share[cols] = hi
@@ -310,18 +313,38 @@ class BackupTable:
         """|v_b| per block (N,) each."""
         return [_speed(v[brake.axes]) for brake in self.brakes]
 
-    def _root(self, q, v, x, a, a_g, f_lo, f_hi, dt: float, slack=None) -> np.ndarray:
+    def _root(self, q, v, x, a, a_g, f_lo, f_hi, dt: float, slack=None, hint=None) -> np.ndarray:
         """backup._root for every robot: regula falsi with the Illinois rule on [lo, hi], the same
-        arithmetic; a robot whose bracket is done stops changing. With a hold deviation or a slack,
-        the probes share backup._Probe.along's segment terms."""
+        arithmetic, after the hint and its neighbour where 0 < hint < 1; a robot whose bracket is done
+        stops changing. With a hold deviation or a slack, the probes share backup._Probe.along's
+        segment terms."""
         model = self.model
         step = a_g - a
         segment = (self._segment(v, a, a_g, dt, slack)
                    if model.hold_deviation is not None or slack is not None else None)
         lo, hi = np.zeros(f_lo.size), np.ones(f_lo.size)
-        kept = np.zeros(f_lo.size)
+        kept, probes = np.zeros(f_lo.size), np.zeros(f_lo.size, np.int64)   # each robot's at most model.iterations
+
+        def settle(cols, lam):
+            """Probe λ = lam at robots `cols` and move the end of each bracket its verdict replaces."""
+            m = self._merit(q[:, cols], v[:, cols], x[:, cols], a[:, cols] + lam * step[:, cols], dt,
+                            _take(slack, cols), None if segment is None else _segment_of(segment, cols))
+            passed = m >= 0.0
+            probes[cols] += 1
+            hi[cols], f_hi[cols] = np.where(passed, lam, hi[cols]), np.where(passed, m, f_hi[cols])
+            lo[cols], f_lo[cols] = np.where(passed, lo[cols], lam), np.where(passed, f_lo[cols], m)
+            return passed
+
+        warm = np.flatnonzero((0.0 < hint) & (hint < 1.0)) if hint is not None else np.zeros(0, np.intp)
+        if warm.size:
+            lam = np.minimum(np.maximum(np.round(hint[warm] / _LAMBDA_RESOLUTION) * _LAMBDA_RESOLUTION,
+                                        _LAMBDA_RESOLUTION), 1.0 - _LAMBDA_RESOLUTION)   # backup._on_grid
+            passed = settle(warm, lam)
+            wide = hi[warm] - lo[warm] > _LAMBDA_RESOLUTION
+            if wide.any():
+                settle(warm[wide], np.where(passed, lam - _LAMBDA_RESOLUTION, lam + _LAMBDA_RESOLUTION)[wide])
         for _ in range(model.iterations):
-            active = ~(hi - lo <= _LAMBDA_RESOLUTION)
+            active = ~(hi - lo <= _LAMBDA_RESOLUTION) & (probes < model.iterations)
             cols = np.flatnonzero(active)
             if cols.size == 0:
                 break
@@ -340,6 +363,7 @@ class BackupTable:
             lo[cols] = np.where(passed, low, lam)
             f_lo[cols] = np.where(passed, np.where(k < 0, 0.5 * fl, fl), m)
             kept[cols] = np.where(passed, -1.0, 1.0)
+            probes[cols] += 1
         return hi
 
     def _merit(self, q, v, x, a, dt: float, slack=None, segment=None) -> np.ndarray:

@@ -87,12 +87,13 @@ class CompiledBackup:
     def _tables(self):
         return self.row_K, self.row_T, self.norms, self.region_rows, self.region_len, self.region_norms, self.params
 
-    def govern(self, theta, q, v, u, dt: float, slack=None):
+    def govern(self, theta, q, v, u, dt: float, slack=None, hint=None):
         """BackupTable.govern: (the command to send (n, N), λ (N,))."""
         N = q.shape[1]
         sl, has = _slack(slack, N)
         sent, share = np.empty((3, N)), np.empty(N)
-        _govern_all(self._tables(), _f(theta), _f(q), _f(v), _f(u), float(dt), sl, has, sent, share)
+        _govern_all(self._tables(), _f(theta), _f(q), _f(v), _f(u), float(dt), sl, has,
+                    np.zeros(N) if hint is None else _f(hint), sent, share)
         return sent, share
 
     def speed_aware_rows(self, x, v, far: float, a=None, slack=None):
@@ -502,13 +503,31 @@ def _fallback(p, v0, v1, v2):
 
 
 @_jit
-def _root(tables, q, v, x, a, g, f_lo, f_hi, dt, e0, e1, given, seg, scratch):
-    """backup._root: regula falsi with the Illinois rule on [0, 1], probes on the 2⁻¹² grid; returns hi."""
+def _root(tables, q, v, x, a, g, f_lo, f_hi, dt, e0, e1, given, seg, scratch, hint):
+    """backup._root: regula falsi with the Illinois rule on [0, 1], probes on the 2⁻¹² grid, after the
+    hint and its neighbour when 0 < hint < 1; returns hi."""
     p = tables[6]
     res = p[_RES]
     st0, st1, st2 = g[0] - a[0], g[1] - a[1], g[2] - a[2]
-    lo, hi, kept = 0.0, 1.0, 0.0
-    for _ in range(int(p[_ITER])):
+    lo, hi, kept, probes = 0.0, 1.0, 0.0, int(p[_ITER])
+    if 0.0 < hint and hint < 1.0:
+        lam = np.rint(hint / res) * res
+        lam = lam if lam > lo + res else lo + res
+        lam = lam if lam < hi - res else hi - res
+        m = 0.0
+        for probe in range(2):
+            if probe == 1:
+                if hi - lo <= res:
+                    break
+                lam = hi - res if m >= 0.0 else lo + res
+            m = _merit(tables, q, v, x, a[0] + lam * st0, a[1] + lam * st1, a[2] + lam * st2, dt, e0, e1, given,
+                       seg, True, scratch)
+            probes -= 1
+            if m >= 0.0:
+                hi, f_hi = lam, m
+            else:
+                lo, f_lo = lam, m
+    for _ in range(probes):
         if hi - lo <= res:
             break
         lam = (lo * f_hi - hi * f_lo) / (f_hi - f_lo)
@@ -531,8 +550,9 @@ def _root(tables, q, v, x, a, g, f_lo, f_hi, dt, e0, e1, given, seg, scratch):
 
 
 @_jit
-def _govern_all(tables, theta, q, v, u, dt, slack, given, sent, share):
-    """BackupTable.govern for every robot (columns), into `sent` (3, N) and `share` (N,)."""
+def _govern_all(tables, theta, q, v, u, dt, slack, given, hint, sent, share):
+    """BackupTable.govern for every robot (columns), into `sent` (3, N) and `share` (N,); `hint` (N,):
+    each robot's last λ."""
     p = tables[6]
     delta = p[_DELTA]
     P = tables[0].shape[0]
@@ -574,7 +594,7 @@ def _govern_all(tables, theta, q, v, u, dt, slack, given, sent, share):
                 share[i] = 1.0
             continue
         seg = _segment(p, vi, a[0], a[1], a[2], g[0], g[1], g[2], dt, e0, e1, given)
-        hi = _root(tables, qi, vi, x, a, g, m_u, m_g, dt, e0, e1, given, seg, scratch)
+        hi = _root(tables, qi, vi, x, a, g, m_u, m_g, dt, e0, e1, given, seg, scratch, hint[i])
         sent[0, i] = u[0, i] + hi * (u_g0 - u[0, i])
         sent[1, i] = u[1, i] + hi * (u_g1 - u[1, i])
         sent[2, i] = u[2, i] + hi * (u_g2 - u[2, i])

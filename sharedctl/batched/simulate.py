@@ -152,6 +152,7 @@ class Fleet:
         self.law_role = np.full(N, -1)             # the law last engaged (simulator's `law`), −1 for none
         self.engaged_before = np.zeros(N, bool)
         self.has_state = np.zeros(N, bool)         # the law's filters are live (law_state.size > 0)
+        self.share = np.zeros(N)                   # the governor's last λ, where its next search starts
         self.operators, self.theta, self.tally = operators, theta, tally
 
     @property
@@ -165,4 +166,5 @@ class Fleet:
         self.arbiter = self.arbiter.take(keep)
         self.law_role, self.engaged_before, self.has_state = (self.law_role[keep], self.engaged_before[keep],
                                                               self.has_state[keep])
+        self.share = self.share[keep]
         self.operators, self.theta, self.tally = self.operators.take(keep), self.theta[:, keep], self.tally.take(keep)

@@ -340,7 +340,9 @@ class StepKernel:
                 return
             sel = None if cols.size == u_s.shape[1] else cols
             sent, share = self.e.backup.govern(gather(fleet.theta, sel), gather(q, sel), gather(v_meas, sel),
-                                               gather(u_s, sel), self.e.dt, self.observed())
+                                               gather(u_s, sel), self.e.dt, self.observed(),
+                                               gather(fleet.share, sel))
+            fleet.share[slice(None) if sel is None else sel] = share     # where the next search starts
             moved = share > 0.0
             if not moved.any():
                 return
