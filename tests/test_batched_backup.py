@@ -133,6 +133,21 @@ def test_fallback_acceleration_equals_the_scalar_fallback(name, which):
     np.testing.assert_allclose(got, expected, rtol=1e-13, atol=0)
 
 
+def _governed_alike(rng, batch, theta, q, v, u, slack, scalar):
+    """The batched governor against `scalar(i, hint)` robot by robot: cold, then told a last λ for each
+    robot (`_hints`); the same λ and the same commands both times. Returns the scalar results told."""
+    hint = None
+    for _ in range(2):
+        sent, share = batch.govern(theta, q.T, v.T, u.T, DT, slack, hint)
+        expected = [scalar(i, 0.0 if hint is None else hint[i]) for i in range(q.shape[0])]
+        shares = np.array([g.share for g in expected])
+        np.testing.assert_array_equal(share == 0.0, shares == 0.0)
+        np.testing.assert_allclose(share, shares, rtol=1e-12, atol=0)
+        np.testing.assert_allclose(sent, np.stack([g.u for g in expected], axis=1), rtol=0, atol=FORCE_TOL)
+        hint = _hints(rng, shares)
+    return expected
+
+
 @pytest.mark.parametrize("name,which,kernel", _kernels(GOVERNED))
 def test_the_governor_equals_the_scalar_governor_robot_by_robot(name, which, kernel):
     """Each robot its own plant (three masses), its own λ; the command as asked where it is backup-safe
@@ -145,16 +160,8 @@ def test_the_governor_equals_the_scalar_governor_robot_by_robot(name, which, ker
     plants = [OmniRobot(OmniRobotParameters(mass=m)) for m in (6.0, 9.85, 15.0)]
     plant_of = rng.integers(0, len(plants), N)
     theta = np.stack([plants[p].theta for p in plant_of], axis=1)
-    hint = None
-    for _ in range(2):       # cold, then told the last λ (near or at the cold one, anywhere, none)
-        sent, share = batch.govern(theta, q.T, v.T, u.T, DT, hint=hint)
-        expected = [govern(backup, plants[plant_of[i]], loop.feasible, q[i], v[i], u[i], DT,
-                           hint=0.0 if hint is None else hint[i]) for i in range(N)]
-        shares = np.array([g.share for g in expected])
-        np.testing.assert_array_equal(share == 0.0, shares == 0.0)
-        np.testing.assert_allclose(share, shares, rtol=1e-12, atol=0)
-        np.testing.assert_allclose(sent, np.stack([g.u for g in expected], axis=1), rtol=0, atol=FORCE_TOL)
-        hint = _hints(rng, shares)
+    expected = _governed_alike(rng, batch, theta, q, v, u, None, lambda i, hint: govern(
+        backup, plants[plant_of[i]], loop.feasible, q[i], v[i], u[i], DT, hint=hint))
     kept = sum(g.share == 0.0 and g.feasible for g in expected)
     moved = sum(g.share > 0.0 for g in expected)
     hopeless = sum(not g.feasible for g in expected)
@@ -218,16 +225,8 @@ def test_the_governor_with_a_slack_equals_the_scalar_governor_robot_by_robot(nam
     u = rng.uniform(-60.0, 60.0, (N, 3))
     model = OmniRobot()
     theta = np.repeat(model.theta[:, None], N, axis=1)
-    hint = None
-    for _ in range(2):
-        sent, share = batch.govern(theta, q.T, v.T, u.T, DT, list(slack), hint)
-        expected = [govern(backup, model, loop.feasible, q[i], v[i], u[i], DT, slack[:, i],
-                           hint=0.0 if hint is None else hint[i]) for i in range(N)]
-        shares = np.array([g.share for g in expected])
-        np.testing.assert_array_equal(share == 0.0, shares == 0.0)
-        np.testing.assert_allclose(share, shares, rtol=1e-12, atol=0)
-        np.testing.assert_allclose(sent, np.stack([g.u for g in expected], axis=1), rtol=0, atol=FORCE_TOL)
-        hint = _hints(rng, shares)
+    expected = _governed_alike(rng, batch, theta, q, v, u, list(slack), lambda i, hint: govern(
+        backup, model, loop.feasible, q[i], v[i], u[i], DT, slack[:, i], hint=hint))
     moved = sum(g.share > 0.0 and g.feasible for g in expected)
     hopeless = sum(not g.feasible for g in expected)
     assert min(moved, hopeless) >= 5, (moved, hopeless)

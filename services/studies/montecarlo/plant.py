@@ -42,6 +42,9 @@ class PlantBatch:
         N = self.theta.shape[1]
         self.brake_torque = (np.full(N, config.brake_torque) if brake_torque is None
                              else np.broadcast_to(np.asarray(brake_torque, float), (N,)).copy())
+        m, c = self.wheel_map, config        # the compiled step's constants (`_step_all`)
+        self._constants = np.array([m.s_r, m.c_r, m.one_r, m.l_r, c.torque_limit, c.wheel_speed_limit,
+                                    c.friction_viscous, c.friction_coulomb, c.coulomb_smoothing, c.brake_smoothing])
 
     def drive_torque(self, tau: np.ndarray, omega: np.ndarray) -> np.ndarray:
         limit, speed_limit = self.config.torque_limit, self.config.wheel_speed_limit
@@ -61,11 +64,8 @@ class PlantBatch:
     def step(self, q: np.ndarray, v: np.ndarray, tau: np.ndarray, disarmed: np.ndarray, dt: float):
         """One RK4 step of dt s: wheel torques τ (3, N) commanded, brakes on the `disarmed` (3, N) wheels."""
         if self.compiled:
-            m, c = self.wheel_map, self.config
-            constants = np.array([m.s_r, m.c_r, m.one_r, m.l_r, c.torque_limit, c.wheel_speed_limit,
-                                  c.friction_viscous, c.friction_coulomb, c.coulomb_smoothing, c.brake_smoothing])
             q_new, v_new = np.empty_like(q, dtype=float), np.empty_like(v, dtype=float)
-            _step_all(constants, self.theta, self.brake_torque, np.ascontiguousarray(q, float),
+            _step_all(self._constants, self.theta, self.brake_torque, np.ascontiguousarray(q, float),
                       np.ascontiguousarray(v, float), np.ascontiguousarray(tau, float),
                       np.ascontiguousarray(disarmed, bool), float(dt), q_new, v_new)
             return q_new, v_new
