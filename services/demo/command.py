@@ -10,8 +10,8 @@ its own children; between the operator and the controller it waits, at most 3 s,
 robot to come to rest: a controller that exits leaves the wheels unpowered and a moving robot
 would coast on), and prints a summary: violations, min_margin and final_speed from
 GroundTruth; tracking and authority (the names of `sharedctl sim --json`) from RobotState;
-and the in-process sampled simulation of the same scenario (`reference`, computed beside the
-run by a child of the lowest priority: reference_job.py) with the deviation between the two.
+and the in-process sampled simulation of the same scenario (`reference`, computed when the run
+is over, by two children: reference_job.py) with the deviation between the two.
 Exit 0 only if nothing was violated, no emergency stop cut the run short, and every child exited
 cleanly. Robot and controller write their exit summaries as JSON in the log
 directory (`--json`); the demo's own JSON holds them, under `processes.<name>.summary`.
@@ -161,8 +161,6 @@ def run(args) -> int:
     failure = None
     robot_priority = None
     start = time.monotonic()
-    # the references depend on the scenario alone: computed beside the run, at the lowest priority
-    reference = None if args.no_reference else ReferenceJob(scenario_arg, args.controller, duration, log_dir)
     try:
         recording = open_demo_recording(args.record, args.robot_id, scenario_arg, scenario.name, can_controller,
                                         seed=None if faults.empty else faults.plan.seed)   # docs/recording.md
@@ -263,11 +261,12 @@ def run(args) -> int:
                "wall_seconds": time.monotonic() - start, **secure.summary(rec)}
     if recording is not None:
         summary["recording"] = recording_summary
-    if reference is not None and (failure is not None or stop.stopped):
-        reference.stop()
-    elif reference is not None:
+    if not (args.no_reference or failure is not None or stop.stopped):
+        # after the run, never beside it: the live processes need the host's CPU (reference_job.py)
+        reference = ReferenceJob(scenario_arg, args.controller, duration, log_dir)
         try:
-            summary["reference"], summary["reference_plant"] = reference.result(REFERENCE_TIMEOUT + 2.0 * duration)
+            summary["reference"], summary["reference_plant"] = reference.result(REFERENCE_TIMEOUT + 2.0 * duration,
+                                                                                  stop)
         except RuntimeError as exc:
             summary["reference_error"] = str(exc)
         else:
