@@ -12,6 +12,10 @@ import socket
 import zenoh
 
 DEFAULT_ENDPOINT = "tcp/127.0.0.1:7447"
+# a peer that is not listening yet, or is gone, is tried again 100 ms, then every 150 to 250 ms later;
+# Zenoh's default (1 s, doubling up to 4 s) made a console started before its controller wait up to a
+# second for it, and a console whose controller restarted up to 4 s (the attempts are loopback connects)
+CONNECT_RETRY = {"period_init_ms": 100, "period_max_ms": 250, "period_increase_factor": 1.5}
 
 
 class EndpointError(ValueError):
@@ -38,6 +42,7 @@ def config(listen: list[str] | None = None, connect: list[str] | None = None) ->
     cfg.insert_json5("scouting/gossip/enabled", "false")
     cfg.insert_json5("listen/endpoints", json.dumps([check_loopback(e) for e in listen or []]))
     cfg.insert_json5("connect/endpoints", json.dumps([check_loopback(e) for e in connect or []]))
+    cfg.insert_json5("connect/retry", json.dumps(CONNECT_RETRY))
     return cfg
 
 

@@ -27,7 +27,7 @@ from pathlib import Path
 
 import zenoh
 
-from ..zenoh_session import EndpointError, check_loopback
+from ..zenoh_session import CONNECT_RETRY, EndpointError, check_loopback
 from .credentials import Credentials
 from .roles import ROLES, access_control, check_role_name
 
@@ -152,7 +152,7 @@ def client_config(role: str, creds: Credentials, connect: list[str], usrpwd: boo
     certificate."""
     role = check_role_name(role)
     cfg: dict = {"mode": "client", "connect": {"endpoints": [check_endpoint(e) for e in connect],
-                                               "timeout_ms": CONNECT_TIMEOUT_MS},
+                                               "timeout_ms": CONNECT_TIMEOUT_MS, "retry": CONNECT_RETRY},
                  "scouting": SCOUTING_OFF, "transport": {}}
     if usrpwd:
         cfg["transport"]["auth"] = {"usrpwd": {"user": role, "password": creds.users[role]}}
