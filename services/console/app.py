@@ -22,8 +22,8 @@ Send times come from a wall clock that never steps (`lifecycle.steady_wall`), so
 host's clock cannot make its commands look stale to the controller.
 
 Control (lease_client.py): the console takes the operator authority lease at start (retrying
-until the controller answers), T takes and R releases it, and commands are sent only while
-this console holds control — an estop request always. The script's clock starts when the
+until the controller answers), T takes and R releases it, a clean end hands it back, and
+commands are sent only while this console holds control — an estop request always. The script's clock starts when the
 first RobotState has arrived and control is held.
 """
 from __future__ import annotations
@@ -307,6 +307,7 @@ class ConsoleApp:
             # ends when the session closes, so the console does not wait out its timeout here
             sender.join(timeout=0.2)
             leaser.join(timeout=0.2)
+            self.lease.hand_back(session)         # control back to the controller now, not at the staleness
             for sub in subscribers:
                 sub.undeclare()
             publisher.undeclare()

@@ -8,6 +8,10 @@ out-of-order and stale lease requests). A query nobody answers (the controller i
 is retried every `retry` seconds. With a `signer` each query carries the operator's signature
 (protocol/signature.py), which a controller with an operators file requires.
 
+A console that ends cleanly hands control back (`hand_back`: one release, waiting at most
+`HAND_BACK_TIMEOUT`): the controller takes authority at once instead of when the operator's
+input goes stale, and another operator may take control without waiting for the lease to expire.
+
 RobotState tells the console when it has lost control without asking (the lease expired or
 was released in-band): `on_state` clears `holding` when a state newer than the grant names
 another holder, or none. The console sends commands only while it holds control — and an
@@ -27,6 +31,7 @@ from ..lifecycle import steady_wall
 
 RETRY = 0.25          # s between lease queries while what we want differs from what we have
 QUERY_TIMEOUT = 0.5   # s a query waits for the controller's reply
+HAND_BACK_TIMEOUT = 0.2   # s the release of a console that ends waits for its reply
 
 
 class LeaseClient:
@@ -80,8 +85,18 @@ class LeaseClient:
                 self.ask(session, action)
             stop.wait(self.retry)
 
-    def ask(self, session, action: LeaseAction) -> LeaseReply | None:
-        """One query; updates `holding` from the reply. None if nobody answered."""
+    def hand_back(self, session) -> bool:
+        """At the console's end: release control if this console holds it. True if the controller
+        answered the release (it says whether it was still ours); False if nothing was held or no
+        answer came within HAND_BACK_TIMEOUT (the lease then expires as usual)."""
+        with self.lock:
+            self.wants = False
+            holding = self.holding
+        return holding and self.ask(session, LeaseAction.RELEASE, HAND_BACK_TIMEOUT) is not None
+
+    def ask(self, session, action: LeaseAction, timeout: float | None = None) -> LeaseReply | None:
+        """One query (waiting `timeout` s for the reply, default the client's); updates `holding` from the
+        reply. None if nobody answered."""
         with self.lock:
             self.seq += 1
             request = LeaseRequest(operator_id=self.operator_id, session_id=self.session_id, seq=self.seq,
@@ -91,7 +106,8 @@ class LeaseClient:
         try:
             payload = encode_message(request)
             attachment = None if self.signer is None else self.signer.attachment(self.key, payload)
-            for answer in session.get(self.key, payload=payload, attachment=attachment, timeout=self.timeout,
+            for answer in session.get(self.key, payload=payload, attachment=attachment,
+                                      timeout=self.timeout if timeout is None else timeout,
                                       **zenoh_qos.options("lease")):
                 if answer.ok is None:
                     continue

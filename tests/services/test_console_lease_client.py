@@ -3,7 +3,7 @@ from types import SimpleNamespace
 
 from sharedctl.protocol.messages import LeaseAction, LeaseReply, LeaseRequest
 from sharedctl.protocol.msgpack_codec import decode_message, encode_message
-from sharedctl.services.console.lease_client import LeaseClient
+from sharedctl.services.console.lease_client import HAND_BACK_TIMEOUT, QUERY_TIMEOUT, LeaseClient
 
 
 class Payload:
@@ -18,10 +18,11 @@ class StandIn:
     """`session.get` answered by a function of the request (None: nobody answers)."""
 
     def __init__(self, answer):
-        self.answer, self.requests, self.attachments, self.qos = answer, [], [], []
+        self.answer, self.requests, self.attachments, self.qos, self.timeouts = answer, [], [], [], []
 
     def get(self, key, payload, timeout, attachment=None, **qos):
         self.qos.append(qos)
+        self.timeouts.append(timeout)
         request = decode_message(payload, None, expect=LeaseRequest)
         self.requests.append((key, request))
         self.attachments.append((payload, attachment))
@@ -90,6 +91,32 @@ def test_a_refused_release_also_means_not_holding():
     client.ask(StandIn(lambda req: reply(req, True, "alice")), LeaseAction.TAKE)
     client.ask(StandIn(lambda req: reply(req, False, None)), LeaseAction.RELEASE)   # already released in-band
     assert not client.holding
+
+
+def test_a_console_that_ends_holding_control_hands_it_back_with_one_short_release():
+    client = LeaseClient("r1", "alice", "a1")
+    session = StandIn(lambda req: reply(req, req.action is LeaseAction.TAKE, "alice" if req.action is LeaseAction.TAKE
+                                        else None))
+    client.ask(session, LeaseAction.TAKE)
+    assert client.hand_back(session)
+    assert [r.action for _, r in session.requests] == [LeaseAction.TAKE, LeaseAction.RELEASE]
+    assert session.timeouts[-1] == HAND_BACK_TIMEOUT < QUERY_TIMEOUT
+    assert not client.holding and not client.wants
+
+
+def test_a_console_that_holds_nothing_hands_nothing_back():
+    client = LeaseClient("r1", "alice", "a1")
+    session = StandIn(lambda req: reply(req, False, "bob"))
+    client.ask(session, LeaseAction.TAKE)                       # refused: bob holds it
+    assert not client.hand_back(session)
+    assert [r.action for _, r in session.requests] == [LeaseAction.TAKE]
+
+
+def test_a_hand_back_nobody_answers_leaves_the_lease_to_expire():
+    client = LeaseClient("r1", "alice", "a1")
+    client.ask(StandIn(lambda req: reply(req, True, "alice")), LeaseAction.TAKE)
+    assert not client.hand_back(StandIn(lambda req: None))
+    assert client.reason == "no answer from the controller"
 
 
 def test_with_a_signer_every_query_carries_a_signature_the_controllers_list_verifies(tmp_path):

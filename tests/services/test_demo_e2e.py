@@ -75,6 +75,15 @@ def test_the_run_lasts_the_scenario_and_nothing_stops_the_robot(demo):
     assert summary["steps"] > 40 * RUNS[scenario]          # RobotState at 50 Hz
 
 
+def test_the_console_that_ends_hands_control_back_at_once(demo):
+    """At the run's end the console, stopped, releases its lease: the controller reports it released
+    (not expired a second later) within half a second of the end, and nothing else took it meanwhile."""
+    scenario, _, summary = demo
+    ends = [e for e in summary["event_log"] if e["kind"] == "lease_change" and e["t"] > 1.0]
+    assert ends and "lease released" in ends[0]["text"], ends
+    assert RUNS[scenario] - 0.1 < ends[0]["t"] < RUNS[scenario] + 0.5, ends
+
+
 def test_the_distributed_run_matches_the_sampled_simulation_of_the_same_plant(demo):
     _, _, summary = demo
     dev = summary["deviation_plant"]
