@@ -172,6 +172,16 @@ def run(args) -> int:
                                                   *faults.robot_arguments(),
                                                   *common, "--duration", backstop, *_json("robot", log_dir)], log_dir)
         robot_priority = raise_priority(children["robot"].popen.pid)
+        # the console while the robot starts, before the controller: its start-up (imports, a CPU burst)
+        # is over before the controller runs its feedback timeout, and it connects as soon as the
+        # controller listens (zenoh_session.CONNECT_RETRY)
+        console_argv = ["console", "--script", scenario_arg,
+                        *secure.zenoh_args("operator", ["--zenoh-connect", console_ep]), *common]
+        console_argv += ["--zenoh-connect", recording.endpoint] if recording is not None and not secure.enabled else []
+        console_argv += ["--zenoh-connect", viewer] if viewer is not None else []
+        console_argv += [] if secure.enabled else faults.console_listener(free_loopback_port, open_session)
+        children["console"] = start_child("console", console_argv + ([] if interactive else ["--headless"]), log_dir,
+                                          interactive=interactive)
         if not secure.wait_up("robot", args.robot_id, children["robot"], STARTUP_TIMEOUT,
                               lambda: wait_listening(robot_ep, children["robot"], STARTUP_TIMEOUT)):
             raise RuntimeError(f"robot did not come up on {robot_ep}")
@@ -182,15 +192,6 @@ def run(args) -> int:
                 *_json("foxglove", log_dir)], log_dir)
             if not wait_listening(viewer, children["foxglove"], STARTUP_TIMEOUT):
                 raise RuntimeError(f"the Foxglove live view did not come up on {args.foxglove}")
-        # the console before the controller: its start-up (imports, a CPU burst) is over before the
-        # controller runs its feedback timeout; it connects when the controller listens (Zenoh retries)
-        console_argv = ["console", "--script", scenario_arg,
-                        *secure.zenoh_args("operator", ["--zenoh-connect", console_ep]), *common]
-        console_argv += ["--zenoh-connect", recording.endpoint] if recording is not None and not secure.enabled else []
-        console_argv += ["--zenoh-connect", viewer] if viewer is not None else []
-        console_argv += [] if secure.enabled else faults.console_listener(free_loopback_port, open_session)
-        children["console"] = start_child("console", console_argv + ([] if interactive else ["--headless"]), log_dir,
-                                          interactive=interactive)
         # the robot is a fresh simulation standing at the scenario's start pose: the first controller is told so;
         # a restarted one (controller.restart_at) resumes from the checkpoint its predecessor left in the log folder
         controller_argv = ["controller", "--scenario", scenario_arg, *law,
