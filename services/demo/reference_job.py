@@ -22,8 +22,6 @@ from pathlib import Path
 from sharedctl.services.children import Child, python_module
 
 MODULE = "sharedctl.services.demo.reference_job"
-
-
 PARTS = ("reference", "plant")
 
 
@@ -59,6 +57,7 @@ class ReferenceJob:
             try:
                 results.append(json.loads(out.read_text()))
             except (OSError, ValueError) as exc:
+                self.stop()
                 raise RuntimeError(f"the reference run failed (exit {child.popen.returncode}; "
                                    f"see {child.log}): {exc}") from None
         return results[0], results[1]

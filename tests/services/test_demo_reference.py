@@ -1,10 +1,13 @@
 """The demo's references (services/demo/reference_job.py): two processes, started when the run is over,
 that return what measure.reference_run and measure.plant_reference_run return, and that a stop ends."""
 import json
+import subprocess
+import sys
 import threading
 
 import pytest
 
+from sharedctl.services.children import Child
 from sharedctl.services.demo.measure import plant_reference_run, reference_run
 from sharedctl.services.demo.reference_job import ReferenceJob
 from sharedctl.services.lifecycle import StopFlag
@@ -34,7 +37,18 @@ def test_a_stop_ends_both_parts_and_says_so(tmp_path):
         assert child.popen.poll() is not None
 
 
-def test_a_part_that_fails_is_reported_with_its_log(tmp_path):
+def test_a_part_that_fails_is_reported_with_its_log_and_the_other_is_stopped(tmp_path):
     job = ReferenceJob("paper_convex", "no-such-law", DURATION, tmp_path)
-    with pytest.raises(RuntimeError, match=r"reference run failed \(exit [1-9].*reference\.reference\.log"):
-        job.result(60.0, StopFlag())
+    plant, _ = job.children["plant"]
+    plant.popen.wait(30.0)                               # fails too (the same law)
+    # in its place, a part still running: the failure of the first must stop it, not leave it behind
+    running = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(30)"], start_new_session=True)
+    try:
+        job.children["plant"] = (Child("reference.plant", running, None), tmp_path / "never.json")
+        with pytest.raises(RuntimeError, match=r"reference run failed \(exit [1-9].*reference\.reference\.log"):
+            job.result(60.0, StopFlag())
+        assert running.poll() is not None
+    finally:
+        if running.poll() is None:
+            running.kill()
+            running.wait()
