@@ -23,8 +23,8 @@ host's clock cannot make its commands look stale to the controller.
 
 Control (lease_client.py): the console takes the operator authority lease at start (retrying
 until the controller answers), T takes and R releases it, a clean end hands it back, and
-commands are sent only while this console holds control — an estop request always. The script's clock starts when the
-first RobotState has arrived and control is held.
+commands are sent only while this console holds control — an estop request always. The
+script's clock starts when the first RobotState has arrived and control is held.
 """
 from __future__ import annotations
 
