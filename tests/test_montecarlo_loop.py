@@ -75,6 +75,47 @@ KERNELS = [False, pytest.param(True, marks=pytest.mark.skipif(numba is None, rea
 
 
 @pytest.mark.parametrize("compiled", KERNELS, ids=["numpy", "compiled"])
+def test_the_batched_prediction_over_the_loop_delay_is_the_controllers(compiled):
+    """SampledBatch.predict, robot by robot, is shared_controller.predict over the commands that robot
+    sent last: delays longer than its history, a ring written round more than once, no delay at all,
+    each robot its own θ. numpy and compiled give the same floats."""
+    from sharedctl.batched.sampled import SampledBatch
+    from sharedctl.shared_controller import HISTORY, predict
+
+    rng = np.random.default_rng(3)
+    case = _Case()
+    N = 48
+    loop = case.loop("ce")
+    batch = SampledBatch(BatchProblem.replicate(loop, np.tile(case.q0, (N, 1)), np.tile(case.v0, (N, 1))), 0.002,
+                         compiled=compiled)
+    assert batch.compiled == compiled
+    robots = [OmniRobot(OmniRobotParameters(mass=m, body_inertia=i))
+              for m, i in zip(rng.uniform(5.0, 28.0, N), rng.uniform(0.3, 0.8, N))]
+    batch.fleet.theta = np.stack([r.theta for r in robots], axis=1)
+    batch.sent = rng.uniform(-60.0, 60.0, batch.sent.shape)
+    batch.sent_count = rng.integers(0, 3 * HISTORY, N)
+    batch.sent_count[:4] = [0, 1, HISTORY, HISTORY + 5]
+    lag = rng.integers(0, 30, N)
+    lag[4:8] = [0, 13, 25, 200]
+    q, v = rng.uniform(-2.0, 2.0, (3, N)), rng.uniform(-2.0, 2.0, (3, N))
+    q_p, v_p = batch.predict(q.copy(), v.copy(), lag)
+    for i, robot in enumerate(robots):
+        use = min(lag[i], batch.sent_count[i], HISTORY)
+        ring = batch.sent[:, i * HISTORY:(i + 1) * HISTORY]
+        commands = [ring[:, (batch.sent_count[i] - use + j) % HISTORY] for j in range(use)]
+        q_s, v_s = predict(robot, q[:, i], v[:, i], commands, 0.002)
+        np.testing.assert_allclose(q_p[:, i], q_s, rtol=1e-13, atol=1e-13, err_msg=f"robot {i}")
+        np.testing.assert_allclose(v_p[:, i], v_s, rtol=1e-13, atol=1e-12, err_msg=f"robot {i}")
+    other = SampledBatch(batch.problem, 0.002, compiled=not compiled) if numba is not None else None
+    if other is not None:
+        other.fleet.theta, other.sent, other.sent_count = batch.fleet.theta, batch.sent, batch.sent_count
+        q_o, v_o = other.predict(q.copy(), v.copy(), lag)
+        assert np.array_equal(q_o, q_p) and np.array_equal(v_o, v_p)
+    moved = np.minimum(lag, np.minimum(batch.sent_count, HISTORY)) > 0
+    assert moved.any() and (~moved).any() and np.array_equal(q_p[:, ~moved], q[:, ~moved])
+
+
+@pytest.mark.parametrize("compiled", KERNELS, ids=["numpy", "compiled"])
 def test_the_batched_plant_is_the_robots_plant_to_rounding(compiled):
     rng = np.random.default_rng(7)
     config = RobotSimConfig()

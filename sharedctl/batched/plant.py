@@ -14,6 +14,11 @@ import numpy as np
 
 from ..models.omni_robot import OmniRobot
 
+try:                                    # optional: the `montecarlo` extra
+    import numba
+except ImportError:                     # pragma: no cover - exercised where numba is absent
+    numba = None
+
 
 class BatchPlantError(TypeError):
     """A model the batch has no vectorised form for."""
@@ -32,6 +37,34 @@ def acceleration(theta: np.ndarray, v: np.ndarray, u: np.ndarray, out: np.ndarra
     np.divide(u[1] + a_psi * v[0], m1, out=out[1])
     np.divide(u[2], m3, out=out[2])
     return out
+
+
+def predict_rings(theta, ring, count, use, history: int, dt: float, q, v) -> None:
+    """shared_controller.predict for every robot (columns), in place on q, v (3, N): robot i's last
+    use[i] commands of its ring `ring`[:, i·history : (i + 1)·history] (`count`[i] written so far,
+    oldest first), each held dt — per period the acceleration at its start (`acceleration`'s
+    operations), q += q̇ dt + ½a dt², q̇ += a dt. Compiled robot by robot where numba is installed
+    (`predict_rings_compiled`; the same operations in the same order)."""
+    half = 0.5 * dt * dt
+    for i in range(q.shape[1]):
+        m1, m3, ath = theta[0, i], theta[1, i], theta[2, i]
+        q0, q1, q2, v0, v1, v2 = q[0, i], q[1, i], q[2, i], v[0, i], v[1, i], v[2, i]
+        for j in range(use[i]):
+            slot = i * history + (count[i] - use[i] + j) % history
+            a_psi = ath * v2
+            a0 = (ring[0, slot] - a_psi * v1) / m1
+            a1 = (ring[1, slot] + a_psi * v0) / m1
+            a2 = ring[2, slot] / m3
+            q0 = q0 + dt * v0 + half * a0
+            q1 = q1 + dt * v1 + half * a1
+            q2 = q2 + dt * v2 + half * a2
+            v0 = v0 + dt * a0
+            v1 = v1 + dt * a1
+            v2 = v2 + dt * a2
+        q[0, i], q[1, i], q[2, i], v[0, i], v[1, i], v[2, i] = q0, q1, q2, v0, v1, v2
+
+
+predict_rings_compiled = numba.njit(cache=True, error_model="numpy")(predict_rings) if numba is not None else None
 
 
 def regressor_times(v, w, a, theta) -> np.ndarray:

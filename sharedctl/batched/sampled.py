@@ -6,7 +6,8 @@ The continuous batch (simulate.py) integrates plant and law together; a real con
 
 1. with state feedback and a loop delay of L periods (feedback age + command transit), the
    sample is first predicted over the delay by the commands this controller sent meanwhile
-   (shared_controller.predict: the model's acceleration at each period's start, held);
+   (shared_controller.predict: the model's acceleration at each period's start, held; compiled
+   robot by robot where numba is installed, plant.predict_rings);
 2. the sharing function at the sample (StepKernel.decide) and the law (re)initialisation
    (StepKernel.engage) — on the robots whose sample lies inside their active group (`lawful`);
    an engaged robot outside it (possible only sampled, with delay) gets the recovery force
@@ -33,7 +34,7 @@ from ..shared_controller import HISTORY, SharedController
 from .arbiter import HUMAN, MACHINE, ArbiterArrays
 from .laws import gather, scatter
 from .operators import DesiredBatch
-from .plant import acceleration
+from .plant import acceleration, predict_rings_compiled
 from .problem import BatchProblem
 from .results import Tally
 from .simulate import Engine, Fleet
@@ -42,7 +43,12 @@ from .simulate import Engine, Fleet
 class SampledBatch:
     """The sampled shared controller for N robots (one scenario), period `dt` seconds."""
 
-    def __init__(self, problem: BatchProblem, dt: float):
+    def __init__(self, problem: BatchProblem, dt: float, compiled: bool | None = None):
+        """`compiled`: the prediction over the loop delay robot by robot with numba (plant.predict_rings;
+        None: where it is installed; True: required; False: the numpy code of `predict`)."""
+        if compiled and predict_rings_compiled is None:
+            raise ValueError("a compiled prediction needs numba (the montecarlo extra)")
+        self.compiled = predict_rings_compiled is not None if compiled is None else bool(compiled)
         if not (dt > 0 and np.isfinite(dt)):
             raise ValueError("the control period must be positive and finite")
         self.problem = problem
@@ -133,10 +139,16 @@ class SampledBatch:
         return u_s, np.where(moved, dec.authority, -1), finite | ~running
 
     def predict(self, q: np.ndarray, v: np.ndarray, lag: np.ndarray):
-        """shared_controller.predict per robot over its last min(lag, sent) commands (oldest first)."""
+        """shared_controller.predict per robot over its last min(lag, sent) commands (oldest first); with
+        `compiled`, plant.predict_rings robot by robot (the same floats)."""
         use = np.minimum(np.asarray(lag, dtype=np.int64), np.minimum(self.sent_count, HISTORY))
         longest = int(use.max()) if use.size else 0
         if longest == 0:
+            return q, v
+        if self.compiled:
+            q, v = np.array(q, dtype=float, order="C"), np.array(v, dtype=float, order="C")
+            predict_rings_compiled(np.ascontiguousarray(self.fleet.theta, dtype=float), self.sent, self.sent_count, use,
+                                   HISTORY, float(self.dt), q, v)
             return q, v
         # the robots with commands to predict over, longest first: those still predicting at each
         # iteration j (use ≥ longest − j) are then a prefix of them
