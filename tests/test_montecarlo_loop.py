@@ -3,8 +3,9 @@
 The oracle is the sampled fault loop of tests/test_fault_envelope_properties.py (`FaultLoop`): the
 scalar `SharedController.step` on the scalar `Plant`, through the same model of the CAN link,
 drives and watchdogs, written robot by robot. A batch whose robots carry different faults (CAN
-delays feedback- and command-ward, a hang, a kill) must follow each robot's scalar run to
-rounding, for every configuration; the batched plant must be `Plant.step`; and the loop must see
+delays feedback- and command-ward, a hang, a kill, landing while the machine holds the robot off
+the wall: the laws, the governor and the prediction over the delay all act) must follow each
+robot's scalar run to rounding, for every configuration; the batched plant must be `Plant.step`; and the loop must see
 what a missing brake does (a planted unsafe configuration). The plant and the oracle run in numpy
 and compiled (where numba is installed); both are held to the scalar code.
 """
@@ -24,7 +25,7 @@ from sharedctl.services.studies.montecarlo.plant import PlantBatch, numba
 
 from .test_fault_envelope_properties import Envelope, FaultLoop
 
-PERIODS = 1000                              # 2 s of the adversarial approach to the wall
+PERIODS = 1600                              # 3.2 s of the adversarial approach: the machine takes over at ≈ 2 s
 
 
 class _Case:
@@ -41,8 +42,9 @@ class _Case:
         return self.scenario.closed_loop(law)[0]
 
 
-#: per robot: (feedback periods, transit periods, kill period, hang start, hang periods)
-ROBOTS = [(0, 0, NEVER, NEVER, 0), (3, 2, NEVER, 500, 30), (8, 5, 600, NEVER, 0), (13, 12, NEVER, 550, 50)]
+#: per robot: (feedback periods, transit periods, kill period, hang start, hang periods); the faults
+#: land while the machine holds the robot off the wall (from period ≈ 1008)
+ROBOTS = [(0, 0, NEVER, NEVER, 0), (3, 2, NEVER, 1150, 30), (8, 5, 1200, NEVER, 0), (13, 12, NEVER, 1100, 50)]
 
 
 @pytest.mark.parametrize("law", ["ce", "nce", "of"])
@@ -68,6 +70,8 @@ def test_each_robot_of_a_batch_follows_its_scalar_fault_loop_to_rounding(law):
         np.testing.assert_allclose(batch.v[:, i], scalar.ps.qd, atol=1e-8, err_msg=f"robot {i}")
         assert bool(batch.estopped[i]) == scalar.estopped, f"robot {i}"
     assert batch.estopped.tolist() == [False, False, False, True], "the 50-period hang trips the watchdogs"
+    assert batch.acted.all(), "the machine acted in every run (the laws, the governor and the prediction ran)"
+    assert all(scalar.min_margin < loop.sharing.bands.b1 for scalar in expected), "every robot came into the band b1"
 
 
 KERNELS = [False, pytest.param(True, marks=pytest.mark.skipif(numba is None, reason="numba is not installed "
