@@ -68,8 +68,10 @@ def arbitrate(table: GroupTable, params: SharingParameters, state: ArbiterArrays
     """One sample of the sharing function for every robot; returns (new state, decisions).
 
     `row_x` (P, N) is k q + t of every distinct row, `missed` (G, N) the hazardous rows each group
-    misses and `chosen` (N,) the result of select_group for this sample; `push_away` (N,): has each
-    operator's push turned away (sharing.push_turned_away; None: unknown, release in the safe set only).
+    misses and `chosen` (N,) the result of select_group for this sample — or a function that gives it
+    for the robots of a mask (N,) bool (−1 elsewhere), asked only for the robots whose group is chosen
+    anew; `push_away` (N,): has each operator's push turned away (sharing.push_turned_away; None:
+    unknown, release in the safe set only).
     """
     N = intent.size
     overall = situation.overall
@@ -112,6 +114,8 @@ def arbitrate(table: GroupTable, params: SharingParameters, state: ArbiterArrays
         needs = latched
     applies = situation.containing.take(table.region_of.take(old_safe) * N + arange)
     stale = ~has_old | (latched & ~before) | ~applies | (missed.take(old_safe * N + arange) > 0)
+    if callable(chosen):
+        chosen = chosen(needs & stale)
     group = np.where(needs & stale & (chosen >= 0), chosen, old)
     group_changed = group != old
 

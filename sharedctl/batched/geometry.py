@@ -145,6 +145,30 @@ class AllGroups:
     p: np.ndarray               # (G, n, N)
     value: np.ndarray           # (G, N) ½(|z|² + |p|²), +∞ where the group does not apply (x ≥ 0)
 
+    def p_of(self, group: np.ndarray, cols: np.ndarray) -> np.ndarray:
+        """(n, M): p of each robot of `cols` (M,) in its own `group` (M,)."""
+        return self.p[group, :, cols].T
+
+
+class GroupsOnDemand:
+    """all_groups' rows for every robot, its per-group part (p, the selection values) for the robots
+    that ask (shared_controller's _EveryGroupOnDemand for a batch): a sample in which the machine
+    keeps its group, or the operator keeps authority, never needs them."""
+
+    def __init__(self, table: GroupTable, q, v, ref: RowReference, lam: float):
+        self.table, self.v = table, v
+        self.rows, self.w = row_values(table, q, v, ref, lam)
+
+    def values(self, cols: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(p (G, n, M), value (G, M)) of the robots `cols` (M,)."""
+        rows = self.rows
+        return group_values(self.table, rows.x[:, cols], rows.z[:, cols], self.w[:, cols], self.v[:, cols])
+
+    def p_of(self, group: np.ndarray, cols: np.ndarray) -> np.ndarray:
+        """(n, M): p of each robot of `cols` (M,) in its own `group` (M,)."""
+        p, _ = self.values(cols)
+        return p[group, :, np.arange(cols.size)].T
+
 
 @dataclass(frozen=True)
 class RowReference:
@@ -167,6 +191,13 @@ def row_reference(table: GroupTable, qd, qd_dot, shape: ReferenceShape) -> RowRe
 
 def all_groups(table: GroupTable, q, v, ref: RowReference, lam: float) -> AllGroups:
     """(6), (11) for every group and robot: the selection values ½(|z|² + |p|²)."""
+    rows, w = row_values(table, q, v, ref, lam)
+    p, value = group_values(table, rows.x, rows.z, w, v)
+    return AllGroups(rows, p, value)
+
+
+def row_values(table: GroupTable, q, v, ref: RowReference, lam: float) -> tuple[RowValues, np.ndarray]:
+    """all_groups' part per distinct row: (x, ẋ, z; and w = (x/x_r)ẋ_r + (1 + λ)z, (P, N))."""
     x = table.row_K @ q
     x += table.row_T
     z = np.divide(x, ref.x_r)
@@ -174,6 +205,12 @@ def all_groups(table: GroupTable, q, v, ref: RowReference, lam: float) -> AllGro
     w = np.exp(z)
     w *= ref.x_r_dot
     w += (1.0 + lam) * z
+    return RowValues(x, table.row_K @ v, z, ref.shifted), w
+
+
+def group_values(table: GroupTable, x, z, w, v) -> tuple[np.ndarray, np.ndarray]:
+    """all_groups' part per group, from the rows' x, z, w (P, M) and the velocities v (n, M):
+    (p = v − K_g⁻¹ w_g (G, n, M), the selection values (G, M))."""
     v_ref = np.matmul(table.K_inv, w[table.group_rows])
     p = np.subtract(v[None], v_ref, out=v_ref)
     outside_rows = ~(x < 0.0)
@@ -183,7 +220,7 @@ def all_groups(table: GroupTable, q, v, ref: RowReference, lam: float) -> AllGro
     value += np.einsum("gim,gim->gm", p, p)     # |p|² per group, without a (G, n, N) temporary
     value *= 0.5
     value[((table.group_sel @ outside_rows) > 0.0) | np.isnan(value)] = np.inf
-    return AllGroups(RowValues(x, table.row_K @ v, z, ref.shifted), p, value)
+    return p, value
 
 
 def reference_inside(table: GroupTable, shifted_reference: np.ndarray) -> np.ndarray:
@@ -247,6 +284,10 @@ class Situation:
     hazard_rows: np.ndarray     # (P, N) bool: hazardous rows (meaningful in containing regions)
     margin: np.ndarray          # (N,) FeasibleSet.margin
     inside: np.ndarray          # (N,) FeasibleSet.contains
+
+    def take(self, cols: np.ndarray) -> "Situation":
+        return Situation(self.overall[cols], self.containing[:, cols], self.hazard_rows[:, cols], self.margin[cols],
+                         self.inside[cols])
 
 
 def classify(table: GroupTable, rows: RowValues, bands: Bands, seen: np.ndarray | None = None) -> Situation:

@@ -8,8 +8,10 @@ The continuous batch (simulate.py) integrates plant and law together; a real con
    sample is first predicted over the delay by the commands this controller sent meanwhile
    (shared_controller.predict: the model's acceleration at each period's start, held; compiled
    robot by robot where numba is installed, plant.predict_rings);
-2. the sharing function at the sample (StepKernel.decide) and the law (re)initialisation
-   (StepKernel.engage) — on the robots whose sample lies inside their active group (`lawful`);
+2. the sharing function at the sample (StepKernel.decide; every group's selection value only for
+   the robots whose group is chosen anew, as the scalar controller's _EveryGroupOnDemand) and the
+   law (re)initialisation (StepKernel.engage) — on the robots whose sample lies inside their active
+   group (`lawful`);
    an engaged robot outside it (possible only sampled, with delay) gets the recovery force
    (SharedController.recovery_force) and its law is disengaged;
 3. u_s = w_h u_h + w_f u_f, made backup-safe by the governor (StepKernel.rates at its first
@@ -93,7 +95,7 @@ class SampledBatch:
         Y[L.q], Y[L.v] = q, v
         theta_hat, law_state = Y[L.theta], Y[L.law_state]
         v_used = e.observer.velocity(q, Y[L.obs]) if e.observer else v
-        groups, _, _, dec = self.kernel.decide(fleet, q, v_used, wish, u_h, intent, dt)
+        groups, _, _, dec = self.kernel.decide(fleet, q, v_used, wish, u_h, intent, dt, on_demand=True)
         engaged = (dec.authority != HUMAN) & (dec.group >= 0)
         g = np.maximum(dec.group, 0)
         x_group = groups.rows.x[e.table.group_rows[g].T, np.arange(N)]      # (n, N): the active group's rows at q

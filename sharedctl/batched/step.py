@@ -24,10 +24,8 @@ import numpy as np
 from ..sharing import Mode
 from .arbiter import HUMAN, MACHINE, arbitrate
 from .geometry import (
-    RowValues, all_groups, classify, missed_rows, projected_configuration, reference_inside, row_reference,
-    push_turned_away,
-    wish_admissible,
-    select_group,
+    GroupsOnDemand, RowValues, all_groups, classify, missed_rows, projected_configuration, reference_inside,
+    row_reference, push_turned_away, wish_admissible, select_group,
 )
 from .laws import GroupFrame, coordinates, gather, projected_reference, scatter
 from .plant import acceleration, regressor_times
@@ -133,21 +131,35 @@ class StepKernel:
         stop = np.flatnonzero(~going)
         return stop, finite[stop] | escaped[stop]
 
-    def decide(self, fleet, q, v_meas, wish, u_h0, intent, dt):
+    def decide(self, fleet, q, v_meas, wish, u_h0, intent, dt, on_demand: bool = False):
         """The sharing function sampled at (q, v_meas): (AllGroups, Situation, chosen group, Decisions);
-        fleet.arbiter moves on by dt."""
+        fleet.arbiter moves on by dt. `on_demand`: every group's p and selection value only for the
+        robots whose group the arbiter chooses anew (geometry.GroupsOnDemand; the chosen group is then
+        None): what the sampled controller needs, not the simulator's record of q_r."""
         e = self.e
         table = e.table
         row_ref, ref_ok, wish_ok = self.reference(wish)
-        groups = all_groups(table, q, v_meas, row_ref, e.lam)
+        if on_demand:
+            groups = GroupsOnDemand(table, q, v_meas, row_ref, e.lam)
+        else:
+            groups = all_groups(table, q, v_meas, row_ref, e.lam)
         seen = self.seen_rows(fleet, groups.rows.x, v_meas, u_h0, self.observed())
         situation = classify(table, groups.rows, e.sharing.bands, seen)
         missed = missed_rows(table, situation)
-        chosen = select_group(table, situation, groups.value, missed, ref_ok)
+        if on_demand:
+            def chosen(want):
+                out = np.full(want.size, -1)
+                cols = np.flatnonzero(want)
+                if cols.size:
+                    _, value = groups.values(cols)
+                    out[cols] = select_group(table, situation.take(cols), value, missed[:, cols], ref_ok[:, cols])
+                return out
+        else:
+            chosen = select_group(table, situation, groups.value, missed, ref_ok)
         push_away = push_turned_away(table, seen, u_h0, wish_ok, situation.containing, e.sharing.bands)
         fleet.arbiter, dec = arbitrate(table, e.sharing, fleet.arbiter, situation, seen, missed, chosen,
                                        intent, dt, push_away)
-        return groups, situation, chosen, dec
+        return groups, situation, None if on_demand else chosen, dec
 
     def engage(self, fleet, dec, engaged, groups, theta_hat, law_state) -> None:
         """Law (re)initialisation, as in simulator.simulate: on a take-over, group or law change the
@@ -171,7 +183,7 @@ class StepKernel:
                 if sub.size and law.state_size:
                     g = dec.group[sub]
                     z = groups.rows.z[table.group_rows[g], sub[:, None]].T
-                    law_state[: law.state_size, sub] = law.initial_state(z, groups.p[g, :, sub].T)
+                    law_state[: law.state_size, sub] = law.initial_state(z, groups.p_of(g, sub))
             fleet.law_role[cols] = roles
             fleet.has_state[cols] = e.state_size[roles] > 0
         fleet.has_state &= ~release
