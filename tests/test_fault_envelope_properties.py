@@ -28,10 +28,13 @@ approach every 20 ms from a random instant (at most 50 kills a run, each followe
 vacuous: each property also asserts that in at least 40 % of its examples the robot closed on a face
 so (at a fault instant, for kills and hangs), with the machine acting in the runs without a fault.
 
-The kill property fails on the current code for every configuration (xfail, strict): the minimal
-examples at the end of this file show why — the brake model's blocks (SHARED_BRAKES) and, for OF,
-the governor on the observer's estimate (OBSERVER_ERROR). The paper's sampled loop (no backup-safe
-sets, no prediction) fails the delay-and-loss and the hang properties too, for every configuration.
+The kill property found two ways a stop from a backup-safe state ended outside; the minimal
+examples at the end of this file keep them: a robot that turns while it translates (the wheels'
+brakes are shared by the translation and the yaw, so the stop is bounded by the robot's kinetic
+energy, not block by block: docs/control.md §10) and, under OF, a governor judging the held command
+on an observer's v̂ that lags q̇ (the observer's error is a stated slack of the backup checks). The
+paper's sampled loop (no backup-safe sets, no prediction) fails the delay-and-loss and the hang
+properties for every configuration.
 """
 from __future__ import annotations
 
@@ -71,18 +74,6 @@ NEAR = 0.5                           # m (rad): a fault instant when a run never
 SETTINGS = dict(deadline=None, derandomize=True, database=None, report_multiple_bugs=False,
                 phases=[Phase.explicit, Phase.generate],
                 suppress_health_check=[HealthCheck.too_slow, HealthCheck.filter_too_much])
-
-
-#: Why a kill leaves the set on the current code (the minimal examples at the end of this file).
-SHARED_BRAKES = (
-    "the stop's brake model (sharedctl/backup.py omni_backup, docs/control.md §10 B1) bounds the braked path of the "
-    "translation and of the yaw apart, each with every wheel's brake; the wheels' Coulomb brakes are shared, so a "
-    "robot that turns while it translates stops later than either block allows, and one that translates turns "
-    "(0.17 rad from 1 m/s, where the yaw block allows none): the stop from a backup-safe state can end outside")
-OBSERVER_ERROR = (
-    "the OF configuration's governor and speed-aware rows judge the held command on the observer's v̂, with no "
-    "margin for its error: while the robot approaches a face v̂ lags q̇, and a command that passes on v̂ fails on q̇ "
-    "(besides the shared brakes of the other configurations)")
 
 
 # ----- the oracle: the set's own rows on the true q -------------------------------------------
@@ -383,8 +374,9 @@ def braked_stop_margin(q, v) -> float:
 ], ids=["turning-at-a-wall", "translating-at-a-yaw-limit"])
 def test_an_estop_from_a_state_the_backup_model_calls_safe_stops_inside(q, v):
     """A state the backup model of an estop (T_w = 0: the brakes at once) calls safe — the stop ends
-    at least δ inside the box |x|, |y| ≤ 1, |ψ| ≤ 1.5 — stops inside on the plant. The model gives
-    these states 13.5 mm and 0.1 rad; the plant's stops end 4.4 mm and 0.057 rad outside."""
+    at least δ inside the box |x|, |y| ≤ 1, |ψ| ≤ 1.5 — stops inside on the plant. The plant's stops
+    from these states end 4.4 mm and 0.057 rad outside; a model that brakes the translation and the
+    yaw apart gave them 13.5 mm and 0.1 rad inside, the energy bound gives −6.7 mm and −0.41 rad."""
     q, v = np.array(q), np.array(v)
     box = FeasibleSet.from_regions([Polytope.from_rows(*BOX)])
     model, plant = ESTOP.state_margin(box, q, v), braked_stop_margin(q, v)
@@ -398,15 +390,17 @@ def killed_at(case, law, operator, envelope, instant) -> FaultLoop:
 @pytest.mark.parametrize("law", ["ce", "nce"])
 def test_a_kill_while_the_operator_turns_the_robot_stops_inside(law):
     """The kill test's example, shrunk: no delay, no loss, random deflections (the operator has
-    authority, turning the robot at 1.2 rad/s while it moves at 0.5 m/s, ψ = −1.19); the stop
-    passes ψ = −π/2 by 2.5 mrad."""
+    authority, turning the robot at 1.2 rad/s while it moves at 0.5 m/s, ψ = −1.19). A brake model
+    that stops the translation and the yaw apart, each with every wheel's brake, calls this state
+    safe, and the stop passes ψ = −π/2 by 2.5 mrad."""
     killed = killed_at(S.random_union_case(0), law, ("random", 0), Envelope(), 2.998)
     assert killed.min_margin > 0.0, killed.report(", killed at t=2.998 s")
 
 
 def test_a_kill_during_an_output_feedback_approach_stops_inside():
     """The kill test's example for OF, shrunk: a 2 ms command transit, no loss, a rush at 1.37 m/s;
-    v̂ = −1.23 m/s against q̇ = −1.36 m/s, the governed command's margin on q̇ is −72 mm, and the
-    stop ends 0.9 mm outside."""
+    v̂ = −1.23 m/s against q̇ = −1.36 m/s. A governor that judges the command on v̂ alone (no slack
+    for the observer's error) sends one whose margin on q̇ is −72 mm, and the stop ends 0.9 mm
+    outside."""
     killed = killed_at(S.random_union_case(2), "of", ("rush", 0), Envelope(0, 1), 1.144)
     assert killed.min_margin > 0.0, killed.report(", killed at t=1.144 s")
