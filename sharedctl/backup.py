@@ -49,6 +49,7 @@ backup-safe (docs/control.md §10 for the argument). Pure: no clocks, no I/O.
 """
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass, field
 
@@ -514,24 +515,32 @@ def uncertain_prediction(backup: BackupModel, model, q, v, slack, commands, dt: 
     ε ← ε + η dt + y, the offset — how far q may be from the prediction — by p ← p + ε dt + ½η dt² + x
     (η = acceleration_spread at the period's largest speeds, (x, y) the deviation over dt from speeds
     |v_b| + ε_b and accelerations |a_b| + η_b). What it leaves out is what `predict` leaves out: the
-    plant's friction and its parameters against the model's."""
+    plant's friction and its parameters against the model's.
+
+    It runs once per control period over every period of the loop delay, so the per-period work is
+    kept to the arithmetic: the block axes and the hold deviation's methods are looked up once, and
+    the check that the slack stays within its bound is the period's own growth (`_growth`)."""
     q, v = np.asarray(q, float), np.asarray(v, float)
     eps = [float(e) for e in slack]
     offset = [0.0] * len(backup.blocks)
     half = 0.5 * dt * dt
+    axes = [tuple(block.axes) for block in backup.blocks]
+    spread = getattr(backup.hold_deviation, "acceleration_spread", None)
+    by_block = getattr(backup.hold_deviation, "by_block", None)
+    deviation = by_block if by_block is not None else functools.partial(_deviation, backup)
     for u in commands:
         a = model.acceleration(q, v, u)
         v_list, a_list = v.tolist(), a.tolist()
-        speeds = _block_speeds(backup, v_list)
-        accelerations = [_norm([a_list[i] for i in block.axes]) for block in backup.blocks]
-        fastest = [s + al * dt for s, al in zip(speeds, accelerations)]
-        period = (speeds, accelerations, fastest, eps, dt)
-        # a bound the slack cannot leave over the period: one that `_grown` maps below itself (everything is
+        speeds = [_norm([v_list[i] for i in axis]) for axis in axes]
+        accelerations = [_norm([a_list[i] for i in axis]) for axis in axes]
+        grown = _growth(spread, deviation, speeds, accelerations, eps, dt)
+        # a bound the slack cannot leave over the period: one that `grown` maps below itself (everything is
         # nondecreasing in it, so the slack, starting below it, stays below)
-        bound = [e + 2.0 * (g - e) for e, g in zip(eps, _grown(backup, period, _grown(backup, period, eps)[0])[0])]
-        while any(g > b for g, b in zip(_grown(backup, period, bound)[0], bound)):
+        bound = [e + 2.0 * (g - e) for e, g in zip(eps, grown(grown(eps)[0])[0])]
+        end, eta, dq = grown(bound)
+        while any(g > b for g, b in zip(end, bound)):
             bound = [e + 2.0 * (b - e) + 1e-12 for e, b in zip(eps, bound)]
-        end, eta, dq = _grown(backup, period, bound)
+            end, eta, dq = grown(bound)
         offset = [p + e * dt + 0.5 * h * dt * dt + x for p, e, h, x in zip(offset, eps, eta, dq)]
         eps = end
         q = q + dt * v + half * a
@@ -539,13 +548,21 @@ def uncertain_prediction(backup: BackupModel, model, q, v, slack, commands, dt: 
     return q, v, eps, offset
 
 
-def _grown(backup: BackupModel, period, bound: list):
-    """One period of `uncertain_prediction` from slack ε, if the slack stays within `bound` over it:
-    (the slack at its end, the acceleration's spread η at the bound, the deviation x)."""
-    speeds, accelerations, fastest, eps, dt = period
-    eta = _spread(backup, fastest, bound)
-    dq, dv = _deviation(backup, [s + e for s, e in zip(speeds, eps)], [al + h for al, h in zip(accelerations, eta)], dt)
-    return [e + h * dt + y for e, h, y in zip(eps, eta, dv)], eta, dq
+def _growth(spread, deviation, speeds: list, accelerations: list, eps: list, dt: float):
+    """One period of `uncertain_prediction` from block speeds, accelerations and slack ε at its start: the
+    function of a bound on the slack over the period that gives (the slack at its end, the acceleration's
+    spread η at the bound, the deviation x). `spread`: the hold deviation's acceleration_spread, or None;
+    `deviation(speeds, accelerations, T)`: its by_block, or `_deviation`."""
+    fastest = [s + al * dt for s, al in zip(speeds, accelerations)]
+    base = [s + e for s, e in zip(speeds, eps)]
+    zeros = [0.0] * len(speeds)
+
+    def grown(bound: list):
+        eta = zeros if spread is None else spread(fastest, bound)
+        dq, dv = deviation(base, [al + h for al, h in zip(accelerations, eta)], dt)
+        return [e + h * dt + y for e, h, y in zip(eps, eta, dv)], eta, dq
+
+    return grown
 
 
 def _next_margin(backup: BackupModel, feasible, q: np.ndarray, v: np.ndarray, a, dt: float, slack=None) -> float:

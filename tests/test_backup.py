@@ -228,6 +228,27 @@ def _passes(q, v, u, dt=0.002):
 def test_govern_changes_the_command_no_more_than_needed(x, y, speed, heading, push):
     """Where the governor moves a push towards the face x = 1, its λ is within 0.005 of the least λ
     on the segment u → u_g that passes (an oracle: 30 halvings of the public margins' test)."""
+    _check_no_more_than_needed(x, y, speed, heading, push)
+
+
+#: why the governor can brake more than needed (test_govern_finds_the_least_lambda_where_its_merit_turns_flat)
+ROOT_STALLS = (
+    "backup._root's regula falsi (Illinois) has no bisection safeguard: where the merit along u → u_g is much "
+    "further below 0 at u than above it at u_g, and flat from some λ on (a row's bound takes over the minimum), "
+    "the probes start next to u_g and creep down (−1.31 at u, +0.014 at u_g, flat from 0.37: 0.99, 0.98, 0.96, "
+    "0.92, …), and the 12 allowed end with the bracket wide")
+
+
+@pytest.mark.xfail(strict=True, reason=ROOT_STALLS)
+@pytest.mark.parametrize("x, speed, push", [(0.3125, 0.78125, 312.0), (0.5, 1.150390625, 113.0)])
+def test_govern_finds_the_least_lambda_where_its_merit_turns_flat(x, speed, push):
+    """Examples the property above meets when Hypothesis draws them (λ 0.389 against 0.361, 0.443 against
+    0.380). Hypothesis draws part of its examples from the literals of the project's modules loaded in the
+    process, so whether the property's run meets them depends on what the process has imported."""
+    _check_no_more_than_needed(x, 0.0, speed, 0.0, push)
+
+
+def _check_no_more_than_needed(x, y, speed, heading, push):
     q = np.array([x, y, 0.0])
     v = np.array([speed * math.cos(heading), speed * math.sin(heading), 0.0])
     u = np.array([push, 0.0, 0.0])
@@ -447,6 +468,50 @@ def test_the_uncertain_prediction_holds_every_state_the_slack_leaves_possible(ps
     dq, dv = state.q - q_p, state.qd - v_p
     assert np.hypot(*dq[:2]) <= offset[0] + 1e-9 and abs(dq[2]) <= offset[1] + 1e-9, (dq, offset)
     assert np.hypot(*dv[:2]) <= slack[0] + 1e-9 and abs(dv[2]) <= slack[1] + 1e-9, (dv, slack)
+
+
+def _plain_uncertain_prediction(backup, model, q, v, slack, commands, dt):
+    """uncertain_prediction as its docstring states it, one helper call per term: per period the bound
+    (ε + 2(g(g(ε)) − ε), doubled away from ε until g maps it below itself), then ε, η and x from it."""
+    from sharedctl.backup import _block_speeds, _deviation, _norm, _spread
+
+    def grown(speeds, accelerations, eps, bound):
+        fastest = [s + al * dt for s, al in zip(speeds, accelerations)]
+        eta = _spread(backup, fastest, bound)
+        dq, dv = _deviation(backup, [s + e for s, e in zip(speeds, eps)],
+                            [al + h for al, h in zip(accelerations, eta)], dt)
+        return [e + h * dt + y for e, h, y in zip(eps, eta, dv)], eta, dq
+
+    eps, offset = [float(e) for e in slack], [0.0] * len(backup.blocks)
+    for u in commands:
+        a = model.acceleration(q, v, u)
+        speeds = _block_speeds(backup, v.tolist())
+        accelerations = [_norm([a.tolist()[i] for i in block.axes]) for block in backup.blocks]
+        bound = [e + 2.0 * (g - e) for e, g in zip(eps, grown(speeds, accelerations, eps,
+                                                                 grown(speeds, accelerations, eps, eps)[0])[0])]
+        while any(g > b for g, b in zip(grown(speeds, accelerations, eps, bound)[0], bound)):
+            bound = [e + 2.0 * (b - e) + 1e-12 for e, b in zip(eps, bound)]
+        end, eta, dq = grown(speeds, accelerations, eps, bound)
+        offset = [p + e * dt + 0.5 * h * dt * dt + x for p, e, h, x in zip(offset, eps, eta, dq)]
+        eps = end
+        q, v = q + dt * v + 0.5 * dt * dt * a, v + dt * a
+    return q, v, eps, offset
+
+
+@settings(max_examples=60, deadline=None, derandomize=True)
+@given(q=st.tuples(*[st.floats(-3.0, 3.0)] * 3), v=st.tuples(*[st.floats(-2.5, 2.5)] * 3),
+       slack=st.tuples(st.floats(0.0, 0.3), st.floats(0.0, 1.0)), lag=st.integers(0, 30), seed=st.integers(0, 2**31))
+def test_the_uncertain_prediction_is_its_stated_recursion_to_the_bit(q, v, slack, lag, seed):
+    """backup.uncertain_prediction (which looks the hold deviation's methods up once per call and keeps the
+    last check of the bound as the period's growth) gives the floats of the recursion written plainly."""
+    from sharedctl.backup import uncertain_prediction
+    rng = np.random.default_rng(seed)
+    commands = [rng.uniform(-150.0, 150.0, 3) for _ in range(lag)]
+    q, v = np.array(q), np.array(v)
+    fast = uncertain_prediction(BACKUP, MODEL, q, v, slack, commands, 0.002)
+    plain = _plain_uncertain_prediction(BACKUP, MODEL, q, v, slack, commands, 0.002)
+    assert np.array_equal(fast[0], plain[0]) and np.array_equal(fast[1], plain[1])
+    assert list(fast[2]) == list(plain[2]) and list(fast[3]) == list(plain[3])
 
 
 @pytest.mark.parametrize("controller", S.CONTROLLERS)
