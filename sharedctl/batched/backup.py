@@ -364,6 +364,18 @@ class BackupTable:
             f_lo[cols] = np.where(passed, np.where(k < 0, 0.5 * fl, fl), m)
             kept[cols] = np.where(passed, -1.0, 1.0)
             probes[cols] += 1
+        while True:                                  # backup._root: bisect the brackets the chords left wide
+            cols = np.flatnonzero(~(hi - lo <= _LAMBDA_RESOLUTION))
+            if cols.size == 0:
+                break
+            low, h = lo[cols], hi[cols]
+            lam = np.minimum(np.maximum(np.round(0.5 * (low + h) / _LAMBDA_RESOLUTION) * _LAMBDA_RESOLUTION,
+                                        low + _LAMBDA_RESOLUTION), h - _LAMBDA_RESOLUTION)   # backup._on_grid
+            m = self._merit(q[:, cols], v[:, cols], x[:, cols], a[:, cols] + lam * step[:, cols], dt,
+                            _take(slack, cols), None if segment is None else _segment_of(segment, cols))
+            passed = m >= 0.0
+            hi[cols] = np.where(passed, lam, h)
+            lo[cols] = np.where(passed, low, lam)
         return hi
 
     def _merit(self, q, v, x, a, dt: float, slack=None, segment=None) -> np.ndarray:

@@ -546,6 +546,16 @@ def _root(tables, q, v, x, a, g, f_lo, f_hi, dt, e0, e1, given, seg, scratch, hi
             lo, f_lo = lam, m
             f_hi = 0.5 * f_hi if kept > 0 else f_hi
             kept = 1.0
+    while hi - lo > res:               # the chords stalled: bisect what is left (backup._root)
+        lam = np.rint(0.5 * (lo + hi) / res) * res
+        lam = lam if lam > lo + res else lo + res
+        lam = lam if lam < hi - res else hi - res
+        m = _merit(tables, q, v, x, a[0] + lam * st0, a[1] + lam * st1, a[2] + lam * st2, dt, e0, e1, given,
+                   seg, True, scratch)
+        if m >= 0.0:
+            hi = lam
+        else:
+            lo = lam
     return hi
 
 
