@@ -337,8 +337,7 @@ class BackupTable:
 
         warm = np.flatnonzero((0.0 < hint) & (hint < 1.0)) if hint is not None else np.zeros(0, np.intp)
         if warm.size:
-            lam = np.minimum(np.maximum(np.round(hint[warm] / _LAMBDA_RESOLUTION) * _LAMBDA_RESOLUTION,
-                                        _LAMBDA_RESOLUTION), 1.0 - _LAMBDA_RESOLUTION)   # backup._on_grid
+            lam = _on_grid(hint[warm], 0.0, 1.0)
             passed = settle(warm, lam)
             wide = hi[warm] - lo[warm] > _LAMBDA_RESOLUTION
             if wide.any():
@@ -352,8 +351,7 @@ class BackupTable:
             with np.errstate(divide="ignore", invalid="ignore"):     # f_lo = −inf: the midpoint
                 lam = (low * fh - h * fl) / (fh - fl)
             lam = np.where((low < lam) & (lam < h), lam, 0.5 * (low + h))
-            lam = np.minimum(np.maximum(np.round(lam / _LAMBDA_RESOLUTION) * _LAMBDA_RESOLUTION,
-                                        low + _LAMBDA_RESOLUTION), h - _LAMBDA_RESOLUTION)   # backup._on_grid
+            lam = _on_grid(lam, low, h)
             m = self._merit(q[:, cols], v[:, cols], x[:, cols], a[:, cols] + lam * step[:, cols], dt,
                             _take(slack, cols), None if segment is None else _segment_of(segment, cols))
             passed = m >= 0.0
@@ -369,8 +367,7 @@ class BackupTable:
             if cols.size == 0:
                 break
             low, h = lo[cols], hi[cols]
-            lam = np.minimum(np.maximum(np.round(0.5 * (low + h) / _LAMBDA_RESOLUTION) * _LAMBDA_RESOLUTION,
-                                        low + _LAMBDA_RESOLUTION), h - _LAMBDA_RESOLUTION)   # backup._on_grid
+            lam = _on_grid(0.5 * (low + h), low, h)
             m = self._merit(q[:, cols], v[:, cols], x[:, cols], a[:, cols] + lam * step[:, cols], dt,
                             _take(slack, cols), None if segment is None else _segment_of(segment, cols))
             passed = m >= 0.0
@@ -504,6 +501,12 @@ def _segment_of(segment: dict, cols) -> dict:
     return {"held": [h[cols] for h in segment["held"]], "bounds": [c[cols] for c in segment["bounds"]],
             "command": tuple([e[cols] for e in part] for part in segment["command"]),
             "state": tuple([e[cols] for e in part] for part in segment["state"])}
+
+
+def _on_grid(lam, lo, hi):
+    """backup._on_grid for arrays: λ rounded to the nearest multiple of the resolution strictly inside [lo, hi]."""
+    r = _LAMBDA_RESOLUTION
+    return np.minimum(np.maximum(np.round(lam / r) * r, lo + r), hi - r)
 
 
 def _take(slack, cols):
