@@ -28,9 +28,10 @@ at HZ ≤ 5000 frames/s on both buses; for the whole run unless a window is give
 
 Process faults: ``controller|console|robot.kill_at=SEC`` (SIGKILL), ``….stop_at=SEC,DURATION``
 (SIGSTOP, SIGCONT DURATION later), ``controller.restart_at=SEC`` (a fresh controller, after a
-kill), ``operator.estop_at=SEC`` (an operator's emergency stop: an OperatorCommand with ``estop``
-set, sent straight to the controller from a session of its own — the controller honours an
-estop from anyone). SEC counts from the run's t = 0, the instant the operator was granted the
+kill), ``operator.estop_at=SEC`` (an operator's emergency stop, held down from SEC to the end of the
+run: an OperatorCommand with ``estop`` set every 20 ms, as a console with its estop latched
+sends, straight to the controller from a session of its own — the controller honours an estop
+from anyone). SEC counts from the run's t = 0, the instant the operator was granted the
 lease as the controller reports it. ``seed=N`` sets the seed (``--fault-seed`` otherwise; default 0).
 
 Intruders and bad days (docs/security.md; the demo carries them out itself):

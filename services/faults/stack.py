@@ -13,7 +13,9 @@ the demo is exactly the unimpaired one.
 * process faults (``controller|console|robot.kill_at`` / ``stop_at``, ``controller.restart_at``)
   are carried out by the demo's supervision loop, by PID, only on the demo's own children; a
   stopped child is always continued (SIGCONT) before the demo stops it. ``operator.estop_at``
-  is an OperatorCommand with ``estop`` set that the demo's own session sends to the controller.
+  is an estop button held down: from SEC to the end of the run the demo's own session sends the
+  controller an OperatorCommand with ``estop`` set every ESTOP_PERIOD, as the console does while its
+  estop is latched — so a controller (re)started after SEC, or one that lost a command, still gets it.
 * intruders and bad days (spec.py, INTRUSIONS), carried out by the demo itself, each on a
   thread of its own so that the supervision loop keeps its times: ``robot.reboot_at`` is SIGUSR2
   to the robot (started with ``--drive-restart AXIS,DOWN``); ``can.intruder_at`` sends
@@ -57,6 +59,7 @@ READY_TIMEOUT = 15.0
 POLL = 0.05                    # s, the supervision loop's period when no fault is due sooner
 SCHEDULING_TOLERANCE = 0.005   # s a fault may fire after its time (the demo's wake-up and the signal/put)
 ESTOP_OPERATOR = "fault-estop"  # operator id of the injected estop commands
+ESTOP_PERIOD = 0.02            # s between the held estop's commands (the console's command period)
 INTRUDER_NODE, INTRUDER_TORQUE = 0, 2.0   # what another CAN master asks for (N·m to node 0)
 EVICTING_SESSIONS = 200                   # one-command sessions sent before the captured command is replayed
 
@@ -77,12 +80,19 @@ class Injection:
     pid: int | None = None
     continued_at: float | None = None  # stop_at: when SIGCONT was sent
     skipped: str | None = None
+    sent: int = 0                      # estop_at: commands sent (the button stays held)
+    periods: int = 0                   # estop_at: ESTOP_PERIODs since SEC that the commands sent have covered
+
+    def next_estop(self) -> float:
+        """estop_at: when the held button's next command is due (s on the run's clock)."""
+        return self.fault.at + self.periods * ESTOP_PERIOD
 
     def report(self) -> dict:
         late = None if self.done_at is None else round(self.done_at - self.fault.at, 6)
         return {"fault": self.fault.describe(), "target": self.fault.target, "action": self.fault.action,
                 "planned_at": self.fault.at, "done_at": self.done_at, "late_by": late, "pid": self.pid,
-                "continued_at": self.continued_at, "skipped": self.skipped}
+                "continued_at": self.continued_at, "skipped": self.skipped,
+                **({"sent": self.sent} if self.fault.action == "estop" else {})}
 
 
 def _wait_ready(child, ready: Path, failure: str) -> None:
@@ -278,6 +288,7 @@ class FaultStack:
         times = [inj.fault.at for inj in self.injections if inj.done_at is None and inj.skipped is None]
         times += [inj.fault.at + inj.fault.duration for inj in self.injections
                   if inj.fault.action == "stop" and inj.done_at is not None and inj.continued_at is None]
+        times += [inj.next_estop() for inj in self.injections if inj.fault.action == "estop" and inj.sent]
         return self.t0 + min(times) if times else None
 
     def wait_time(self, now: float) -> float:
@@ -296,6 +307,8 @@ class FaultStack:
             if inj.fault.action == "stop" and inj.done_at is not None and inj.continued_at is None \
                     and t >= inj.fault.at + inj.fault.duration:
                 self._continue(inj, self._clock())
+            if inj.fault.action == "estop" and inj.sent and t >= inj.next_estop():
+                self._send_estop(inj, t)
         dead = [name for name, child in self.infra.items() if child.popen.poll() is not None]
         return f"the fault {', '.join(dead)} exited during the run" if dead else None
 
@@ -313,7 +326,7 @@ class FaultStack:
                 inj.skipped = "no session to send the estop on"
                 return
             inj.done_at = self._clock()
-            self.estop_sender()
+            self._send_estop(inj, t=inj.done_at)
             return
         if action == "restart":
             if name not in self.killed:
@@ -339,6 +352,12 @@ class FaultStack:
             inj.done_at = self._clock()
             os.kill(child.popen.pid, signal.SIGSTOP)
             self.stopped[name] = (child, inj)
+
+    def _send_estop(self, inj: Injection, t: float) -> None:
+        """One command of the held estop; a late wake-up sends one, not the ones it missed."""
+        self.estop_sender()
+        inj.sent += 1
+        inj.periods = max(inj.periods + 1, int((t - inj.fault.at) / ESTOP_PERIOD) + 1)
 
     def _intrude(self, inj: Injection, children: dict) -> None:
         """An intrusion (spec.INTRUSIONS): a signal now, or a thread of its own for what takes time."""

@@ -9,7 +9,7 @@ from types import SimpleNamespace
 import pytest
 
 from sharedctl.services.faults.spec import parse
-from sharedctl.services.faults.stack import POLL, FaultStack, Injection
+from sharedctl.services.faults.stack import ESTOP_PERIOD, POLL, FaultStack, Injection
 from sharedctl.services.faults.zenoh_relay import origin_monotonic
 
 
@@ -86,6 +86,26 @@ def test_a_fault_fires_at_the_instant_the_clock_shows_and_reports_its_lateness()
     report, = faults.report()["processes"]
     assert sent == [100.5037] and report["done_at"] == pytest.approx(0.5037)
     assert report["late_by"] == pytest.approx(0.0037)
+
+
+def test_the_estop_stays_held_until_the_run_ends_so_a_controller_started_after_it_still_gets_it():
+    """`operator.estop_at` is a button held down, as the console's latched estop: one command every ESTOP_PERIOD from
+    SEC on, the supervision loop waking for each; a wake-up 2.5 periods late sends one command, not the three it
+    missed. Sent once, the estop was lost on a controller restarted shortly before it and not yet listening."""
+    sent = []
+    faults, clock = stack(["operator.estop_at=0.5"])
+    faults.estop_sender = lambda: sent.append(clock.now)
+    for dt in (0.0, 0.005, ESTOP_PERIOD + 0.0004, 2 * ESTOP_PERIOD + 0.001):      # each wake-up a little late
+        clock.now = 100.5 + dt
+        faults.tick(clock.now, {}, restart=None)
+    assert sent == pytest.approx([100.5, 100.5 + ESTOP_PERIOD + 0.0004, 100.5 + 2 * ESTOP_PERIOD + 0.001])
+    assert faults.next_due() == pytest.approx(100.5 + 3 * ESTOP_PERIOD)
+    assert faults.wait_time(100.5 + 2.5 * ESTOP_PERIOD) == pytest.approx(0.5 * ESTOP_PERIOD)
+    clock.now = 100.5 + 5.5 * ESTOP_PERIOD                      # the loop overslept
+    faults.tick(clock.now, {}, restart=None)
+    assert len(sent) == 4 and faults.next_due() == pytest.approx(100.5 + 6 * ESTOP_PERIOD)
+    report, = faults.report()["processes"]
+    assert report["done_at"] == pytest.approx(0.5) and report["sent"] == 4
 
 
 def test_an_estop_without_a_session_is_skipped_and_says_why():
