@@ -29,6 +29,7 @@ def test_the_secured_stack_meets_a_router_restart_a_controller_restart_and_an_es
     assert summary["failure"] is None and summary["violations"] == 0, proc.stderr
     fired = {p["fault"]: p for p in summary["injected"]["processes"]}
     assert all(fired[f]["done_at"] is not None and fired[f]["skipped"] is None for f in FAULTS), fired
+    assert fired[FAULTS[-1]]["sent"] > 1                              # the button stayed held
     assert summary["injected"]["intrusions"]["bounce"]["back_listening"] is True
     restarted = summary["processes"]["controller"]["summary"]
     assert restarted["start"].startswith("resumed from a checkpoint") and restarted["mode"] == "estopped"
