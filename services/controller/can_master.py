@@ -5,6 +5,14 @@
   CLOSED_LOOP_CONTROL without error *after* the request; otherwise retried every
   `arm_timeout` seconds. While arming the caller keeps sending zero torque, which feeds the
   drives' watchdogs from the moment they close the loop.
+* Keeping the mode: while running, `keep_torque_mode()` (called by the loop once a period) sends
+  Set_Controller_Mode (TORQUE_CONTROL, PASSTHROUGH) to every axis again every `mode_repeat`
+  seconds. A drive's heartbeat reports its axis state and errors but not its control mode: a drive
+  whose Set_Controller_Mode was lost at arming (CAN loss) closes its loop in the mode it had —
+  position control is ODrive's default — and then ignores every Set_Input_Torque while its
+  heartbeat says all is well and the torque frames keep its watchdog fed, so its brake never
+  engages either. The frame asks for the mode the drive should already be in (a no-op when it
+  is); repeated, a lost one is mended within `mode_repeat` plus the bus's delay.
 * Monitoring: Heartbeat state and error bits per axis (error changes → events), encoder
   estimates per axis (for odometry and the feedback age).
 * Commands: Set_Input_Torque per axis, Estop to all axes, IDLE to all axes.
@@ -90,6 +98,7 @@ class CanMaster:
     bus: object                                  # a Transport, or a python-can bus (send, recv)
     nodes: tuple[int, ...] = DEFAULT_WHEEL_NODES
     arm_timeout: float = 0.5                     # s to see CLOSED_LOOP heartbeats before retrying
+    mode_repeat: float = 0.1                     # s between Set_Controller_Mode repeats while running
     clock: object = time.monotonic
     wall_clock: object = time.time
     axes: dict = field(init=False)
@@ -102,6 +111,8 @@ class CanMaster:
     tx_errors: Counter = field(default_factory=Counter)
     arm_attempts: int = 0
     arm_requested_at: float | None = None
+    mode_sent_at: float = float("-inf")          # s, the last Set_Controller_Mode to every axis
+    mode_repeats: int = 0
     events: list = field(default_factory=list)
     fast_paths: bool = True                      # the per-period frames through cansimple's entry points
     probe_rate: float = DEFAULT_RATE             # Hz, round-trip polls (0: none)
@@ -143,8 +154,19 @@ class CanMaster:
             self.send(cs.ClearErrors(n))
             self.send(cs.SetControllerMode(n, ControlMode.TORQUE_CONTROL, InputMode.PASSTHROUGH))
             self.send(cs.SetAxisState(n, AxisState.CLOSED_LOOP_CONTROL))
-        self.arm_requested_at = now
+        self.arm_requested_at = self.mode_sent_at = now
         self.arm_attempts += 1
+
+    def keep_torque_mode(self, now: float) -> bool:
+        """Set_Controller_Mode (TORQUE_CONTROL, PASSTHROUGH) to every axis again if `mode_repeat` has passed since
+        the last (module doc); True if sent."""
+        if now - self.mode_sent_at < self.mode_repeat:
+            return False
+        for n in self.nodes:
+            self.send(cs.SetControllerMode(n, ControlMode.TORQUE_CONTROL, InputMode.PASSTHROUGH))
+        self.mode_sent_at = now
+        self.mode_repeats += 1
+        return True
 
     def arming_done(self, now: float) -> bool:
         """True once every axis reported CLOSED_LOOP without error since the request; retries on timeout."""

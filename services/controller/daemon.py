@@ -356,6 +356,7 @@ class ControllerDaemon:
             elif faulted:
                 self.estop(now, f"axes {faulted} left closed loop or report errors")
             else:
+                self.master.keep_torque_mode(now)   # a drive that lost its Set_Controller_Mode ignores torques
                 return self.control(now, operator)
         elif self.mode is Mode.ESTOPPED:
             self.u_s, self.tau = np.zeros(self.model.n), np.zeros(3)

@@ -55,6 +55,20 @@ def test_arming_clears_errors_sets_torque_passthrough_then_closed_loop_on_every_
         ]
 
 
+def test_the_torque_mode_is_asked_for_again_every_repeat_period_while_running(master):
+    """A lost Set_Controller_Mode is invisible in the heartbeats (module doc): `keep_torque_mode` sends it to every
+    axis again once `mode_repeat` has passed since the arming request or the last repeat, and not sooner."""
+    master.request_arming()                                   # at 100.0
+    master.bus.sent.clear()
+    assert not master.keep_torque_mode(100.0 + 0.5 * master.mode_repeat) and master.bus.sent == []
+    for k in (1, 2, 3):                                       # each a little after the last one's period
+        assert master.keep_torque_mode(100.0 + k * (master.mode_repeat + 0.001))
+        assert not master.keep_torque_mode(100.0 + k * (master.mode_repeat + 0.001) + 0.5 * master.mode_repeat)
+    assert master.bus.sent == [cs.SetControllerMode(n, ControlMode.TORQUE_CONTROL, InputMode.PASSTHROUGH)
+                               for _ in range(3) for n in (0, 1, 2)]
+    assert master.mode_repeats == 3
+
+
 def test_armed_only_after_closed_loop_heartbeats_newer_than_the_request(master):
     for n in (0, 1, 2):   # stale heartbeats from before the request do not count
         master.handle(message(cs.Heartbeat(n, ODriveError.NONE, AxisState.CLOSED_LOOP_CONTROL)), 99.0)

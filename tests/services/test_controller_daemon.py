@@ -35,6 +35,7 @@ from .processes import reap, wait_for
 pytestmark = pytest.mark.processes   # real processes / sockets: never in a parallel worker
 
 NODES = (0, 1, 2)
+TORQUE_PASSTHROUGH = (ControlMode.TORQUE_CONTROL, InputMode.PASSTHROUGH)
 ROBOT_FRAMES = (cs.Heartbeat, cs.GetEncoderEstimates, cs.GetError, cs.GetIq, cs.GetBusVoltageCurrent, cs.GetTorques)
 
 
@@ -64,6 +65,7 @@ class FakeRobot(threading.Thread):
         self.fed = {n: 0.0 for n in NODES}
         self.watchdog = watchdog
         self.silent = False                           # stop all feedback (CAN silence)
+        self.lose_mode = set()                        # nodes whose next Set_Controller_Mode is lost on the bus
         self.log: list[tuple[float, object]] = []      # (monotonic time, host frame)
         self.lock = threading.Lock()
         self._halt = threading.Event()
@@ -103,6 +105,9 @@ class FakeRobot(threading.Thread):
         if isinstance(frame, cs.ClearErrors):
             self.error[n] = ODriveError.NONE
         elif isinstance(frame, cs.SetControllerMode):
+            if n in self.lose_mode:
+                self.lose_mode.discard(n)
+                return
             self.mode[n] = (frame.control_mode, frame.input_mode)
         elif isinstance(frame, cs.SetAxisState):
             if frame.requested_state is AxisState.CLOSED_LOOP_CONTROL and self.error[n] == ODriveError.NONE:
@@ -113,8 +118,8 @@ class FakeRobot(threading.Thread):
             self.error[n] |= ODriveError.ESTOP_REQUESTED
             self.state[n], self.torque[n] = AxisState.IDLE, 0.0
         elif isinstance(frame, cs.SetInputTorque):
-            self.fed[n] = now
-            if self.state[n] is AxisState.CLOSED_LOOP_CONTROL:
+            self.fed[n] = now                          # fed in any mode, as an ODrive's watchdog is
+            if self.state[n] is AxisState.CLOSED_LOOP_CONTROL and self.mode[n] == TORQUE_PASSTHROUGH:
                 self.torque[n] = frame.input_torque
 
     def run(self) -> None:
@@ -222,6 +227,24 @@ def test_daemon_arms_the_axes_in_torque_passthrough_and_sends_torques_every_peri
         assert gaps.max() < 0.1                        # the drive's 0.1 s watchdog is always fed
     assert robot.armed()                               # no watchdog trip, no estop
     assert proc.poll() is None
+
+
+def test_a_drive_whose_controller_mode_was_lost_at_arming_is_put_in_torque_mode_while_running(robot, daemon_factory):
+    """A drive reports its state and errors, not its control mode: with its Set_Controller_Mode lost on the bus
+    it closes its loop in its old mode and ignores every torque frame while its heartbeat says all is well (and
+    the frames feed its watchdog). The daemon repeats the frame while running (can_master.keep_torque_mode), so
+    the drive is in torque mode within a repeat period plus scheduling. Before, it stayed out of it for good —
+    a robot whose wheel produced no torque, under an operator and a machine that both believed it did."""
+    robot.lose_mode = {1}
+    proc = daemon_factory(robot.port, zenoh_session.free_loopback_port())
+    wait_for(robot.armed, 15.0, "all three axes in CLOSED_LOOP_CONTROL")
+    armed_at = time.monotonic()
+    assert robot.mode[1] is None and robot.mode[0] == robot.mode[2] == TORQUE_PASSTHROUGH
+    wait_for(lambda: robot.mode[1] == TORQUE_PASSTHROUGH, 2.0, "axis 1 in torque control")
+    assert time.monotonic() - armed_at < 1.0
+    repeats = robot.frames(cs.SetControllerMode, 1, since=armed_at)
+    assert repeats and all((f.control_mode, f.input_mode) == TORQUE_PASSTHROUGH for _, f in repeats)
+    assert robot.armed() and proc.poll() is None
 
 
 def test_sigterm_stops_within_2_s_with_zero_torque_and_idle_to_every_axis(robot, daemon_factory):
