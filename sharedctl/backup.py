@@ -507,8 +507,9 @@ def govern(backup: BackupModel, model, feasible, q: np.ndarray, v: np.ndarray, u
     return Governed(u + share * (u_g - u), share, True)
 
 
-def uncertain_prediction(backup: BackupModel, model, q, v, slack, commands, dt: float):
-    """(q, v, slack, offset) after `commands` (oldest first), each held dt, from a state whose velocity
+def uncertain_prediction(backup: BackupModel, model, q, v, slack, commands, dt):
+    """(q, v, slack, offset) after `commands` (oldest first), each held dt (a period, or one per command:
+    shared_controller.in_flight's spans), from a state whose velocity
     is known to within `slack` per block (the observer's v̂ and `BackupModel.observer_error`): q and v
     are stepped as shared_controller.predict steps them (the model's acceleration at the period's
     start, held), and per period the slack grows by the acceleration's spread and the hold's deviation,
@@ -523,12 +524,12 @@ def uncertain_prediction(backup: BackupModel, model, q, v, slack, commands, dt: 
     q, v = np.asarray(q, float), np.asarray(v, float)
     eps = [float(e) for e in slack]
     offset = [0.0] * len(backup.blocks)
-    half = 0.5 * dt * dt
+    spans = (dt,) * len(commands) if isinstance(dt, (int, float)) else tuple(dt)
     axes = [tuple(block.axes) for block in backup.blocks]
     spread = getattr(backup.hold_deviation, "acceleration_spread", None)
     by_block = getattr(backup.hold_deviation, "by_block", None)
     deviation = by_block if by_block is not None else functools.partial(_deviation, backup)
-    for u in commands:
+    for u, dt in zip(commands, spans):
         a = model.acceleration(q, v, u)
         v_list, a_list = v.tolist(), a.tolist()
         speeds = [_norm([v_list[i] for i in axis]) for axis in axes]
@@ -543,7 +544,7 @@ def uncertain_prediction(backup: BackupModel, model, q, v, slack, commands, dt: 
             end, eta, dq = grown(bound)
         offset = [p + e * dt + 0.5 * h * dt * dt + x for p, e, h, x in zip(offset, eps, eta, dq)]
         eps = end
-        q = q + dt * v + half * a
+        q = q + dt * v + (0.5 * dt * dt) * a
         v = v + dt * a
     return q, v, eps, offset
 

@@ -46,6 +46,7 @@ class ControllerState:
     law_state: np.ndarray = field(default_factory=lambda: np.zeros(0))
     observer: np.ndarray = field(default_factory=lambda: np.zeros(0))
     sent: tuple = ()       # the last commands u_s, oldest first (the predictor's input history)
+    held: tuple = ()       # how long each of `sent` but the newest acted (s); the newest acts until the next step
     backup_share: float = 0.0   # the governor's last λ: where its next search starts (backup._root)
 
 
@@ -103,14 +104,16 @@ class SharedController:
         return ControllerState(arbiter, theta.copy(), None, np.zeros(0), observer)
 
     def step(self, state: ControllerState, q: np.ndarray, v: np.ndarray | None, operator: OperatorInput, dt: float,
-             delay: float = 0.0):
+             delay: float = 0.0, elapsed: float | None = None):
         """One sample: returns (next state, output). `v` may be None for output feedback.
 
         `delay` (s): how old (q, q̇) will be when the command computed now acts — the feedback's
         age plus the command's transit, as measured. With state feedback the step then runs on the
         state predicted for that instant (`predict`: the model driven by the commands this
-        controller sent meanwhile), so its barrier acts on where the robot will be, not where it
-        was (predictor feedback, docs/control.md §10).
+        controller sent meanwhile, each over the time it acted: `in_flight`), so its barrier acts
+        on where the robot will be, not where it was (predictor feedback, docs/control.md §10).
+        `elapsed` (s): how long the last command acted, the time since the last step (default dt;
+        a sampler whose ticks come late passes the true interval, where its `dt` may be cut).
 
         The hot path of the daemon (docs/performance.md): per-step constants are cached where
         they are built (stacked rows, gain vectors, parameter box); the per-sample arithmetic —
@@ -122,9 +125,10 @@ class SharedController:
         """
         model, feasible, machine = self.model, self.feasible, self.machine
         observer = machine.observer
-        lag = int(round(delay / dt)) if delay > 0.0 else 0
-        if lag and observer is None and state.sent:
-            q, v = predict(model, q, v, state.sent[-lag:], dt)
+        acted = state.held + (dt if elapsed is None else elapsed,) if state.sent else ()
+        commands, spans = in_flight(state.sent, acted, delay)
+        if commands and observer is None:
+            q, v = predict(model, q, v, commands, spans)
         v_used = observer.velocity(q, state.observer) if observer else np.asarray(v, float)
         mode = self.sharing.mode
         intent = 0.0 if mode is Mode.MACHINE else operator.intent
@@ -133,7 +137,7 @@ class SharedController:
         backup = self.backup
         class_rows = rows
         if backup is not None:
-            judged = judged_state(backup, model, observer, q, v_used, state.sent[-lag:] if lag else (), dt)
+            judged = judged_state(backup, model, observer, q, v_used, commands, spans)
             q_b, v_b, slack, offset = judged
             rows_b = rows if q_b is q else feasible.row_values(floats(q_b), v_b.tolist())
             held = model.acceleration(q_b, v_b, operator.force) if mode is not Mode.MACHINE else None
@@ -204,8 +208,9 @@ class SharedController:
             backup_share=backup_share,
         )
         sent = (state.sent + (u_s,))[-HISTORY:]
+        acted = acted[len(acted) + 1 - len(sent):] if len(sent) > 1 else ()
         next_state = ControllerState(arbiter, theta_next, law_role, law_next, observer_next, sent,   # every field
-                                     last_share)
+                                     acted, last_share)
         if not (all_finite(u_s.tolist()) and all_finite(theta_next.tolist()) and all_finite(law_next.tolist())):
             raise NonFiniteCommand("the shared controller produced a non-finite value")
         return next_state, output
@@ -227,7 +232,33 @@ class SharedController:
 HISTORY = 64
 
 
-def judged_state(backup: BackupModel, model, observer, q, v, commands, dt: float):
+def in_flight(sent: tuple, held: tuple, delay: float) -> tuple[tuple, tuple]:
+    """(commands, spans): what acted over the last `delay` seconds, oldest first, each with how long it
+    acted within them. `sent`: the commands, oldest first; `held`: how long each acted (the newest up to
+    now). Walking back from the newest, each command counts for its own time, the oldest one reached
+    for what is left of the delay — so a late tick (a command held longer than a period) weighs what
+    it held, where a count of commands times one period would replay the last few over the whole delay
+    (a brake started a few periods ago taken for one started a delay ago). Delays shorter than 1 µs
+    and remainders below it are not predicted over; with every command held one period dt and a delay
+    of k·dt this is the last k commands, each held dt."""
+    if not (delay > _NEGLIGIBLE) or not sent:
+        return (), ()
+    commands, spans, left = [], [], delay
+    for u, span in zip(reversed(sent), reversed(held)):
+        if left <= _NEGLIGIBLE:
+            break
+        part = span if span < left + _NEGLIGIBLE else left
+        commands.append(u)
+        spans.append(part)
+        left -= part
+    return tuple(reversed(commands)), tuple(reversed(spans))
+
+
+#: a time below which a delay or a remainder of one is not predicted over (s)
+_NEGLIGIBLE = 1e-6
+
+
+def judged_state(backup: BackupModel, model, observer, q, v, commands, dt):
     """The state the backup-safe checks judge, (q, v, slack, offset): with state feedback (q, v) itself
     (`step` has predicted it already); under output feedback with `backup.observer_error`, every state
     within the observer's error of (q, v̂), predicted over the delay by the commands sent meanwhile
@@ -239,19 +270,24 @@ def judged_state(backup: BackupModel, model, observer, q, v, commands, dt: float
     return uncertain_prediction(backup, model, q, v, backup.observer_error, commands, dt)
 
 
-def predict(model, q, v, commands, dt: float):
-    """(q, q̇) after the commands (oldest first), each held dt: per period the model's acceleration
+def predict(model, q, v, commands, dt):
+    """(q, q̇) after the commands (oldest first), each held dt (a period, or one per command: `in_flight`'s
+    spans): per period the model's acceleration
     at its start, held (q += q̇ dt + ½a dt², q̇ += a dt) — one evaluation per period, so that a
     15 ms delay costs a few tens of µs. The plant's friction, its true parameters and this
     first-order step differ from the truth; the error over a delay L grows like L² times the force
     error over the mass, a margin docs/control.md §10 sizes."""
     q, v = np.asarray(q, float), np.asarray(v, float)
-    half = 0.5 * dt * dt
-    for u in commands:
+    for u, h in zip(commands, _spans(dt, len(commands))):
         a = model.acceleration(q, v, u)
-        q = q + dt * v + half * a
-        v = v + dt * a
+        q = q + h * v + (0.5 * h * h) * a
+        v = v + h * a
     return q, v
+
+
+def _spans(dt, count: int):
+    """dt for each of `count` commands: one period repeated, or the given spans."""
+    return (dt,) * count if isinstance(dt, (int, float)) else tuple(dt)
 
 
 _EMPTY = np.zeros(0)

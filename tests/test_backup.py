@@ -463,6 +463,32 @@ def test_the_uncertain_prediction_holds_every_state_the_slack_leaves_possible(ps
     assert np.hypot(*dv[:2]) <= slack[0] + 1e-9 and abs(dv[2]) <= slack[1] + 1e-9, (dv, slack)
 
 
+@settings(max_examples=30, deadline=None, derandomize=True)
+@given(psi=st.floats(-math.pi, math.pi), speed=st.floats(0.0, 1.2), heading=st.floats(-math.pi, math.pi),
+       yaw_rate=st.floats(-2.0, 2.0), corner=st.integers(0, 7),
+       spans=st.lists(st.floats(0.0005, 0.012), min_size=1, max_size=12),
+       forces=st.lists(st.tuples(st.floats(-150.0, 150.0), st.floats(-150.0, 150.0), st.floats(-10.0, 10.0)),
+                       min_size=12, max_size=12))
+def test_the_uncertain_prediction_over_commands_held_unequal_times_holds_every_state_the_slack_leaves_possible(
+        psi, speed, heading, yaw_rate, corner, spans, forces):
+    """As above, with each command held its own time (shared_controller.in_flight's spans: ticks that came
+    late): the plant, driven by each command for its time, ends within the predicted slack and offset."""
+    from sharedctl.backup import uncertain_prediction
+    q0 = np.array([0.0, 0.0, psi])
+    v_hat = np.array([speed * math.cos(heading), speed * math.sin(heading), yaw_rate])
+    commands = [np.array(f) for f in forces[:len(spans)]]
+    q_p, v_p, slack, offset = uncertain_prediction(BACKUP, MODEL, q0, v_hat, BACKUP.observer_error, commands, spans)
+    plant = Plant(MODEL, RobotSimConfig(friction_viscous=0.0, friction_coulomb=0.0))
+    state = plant.initial_state(q0, _corners(v_hat, BACKUP.observer_error)[corner])
+    for u, h in zip(commands, spans):
+        tau = MODEL.wheel_map.wheel_torques(state.q.tolist(), u.tolist())
+        for _ in range(8):
+            state = plant.step(state, tau, h / 8)
+    dq, dv = state.q - q_p, state.qd - v_p
+    assert np.hypot(*dq[:2]) <= offset[0] + 1e-9 and abs(dq[2]) <= offset[1] + 1e-9, (dq, offset)
+    assert np.hypot(*dv[:2]) <= slack[0] + 1e-9 and abs(dv[2]) <= slack[1] + 1e-9, (dv, slack)
+
+
 def _plain_uncertain_prediction(backup, model, q, v, slack, commands, dt):
     """uncertain_prediction as its docstring states it, one helper call per term: per period the bound
     (ε + 2(g(g(ε)) − ε), doubled away from ε until g maps it below itself), then ε, η and x from it."""

@@ -449,12 +449,14 @@ class ControllerDaemon:
     def control(self, now: float, operator):
         """`SharedController.step`, τ = B(ψ)⁻¹u_s scaled down uniformly to the torque limit; None (and zero
         torque, then an estop) on a non-finite command."""
-        dt = self.period if self.last_step_at is None else min(max(now - self.last_step_at, 0.0), 4 * self.period)
+        # the laws integrate over at most four periods; the predictor runs the last command over the time it acted
+        elapsed = self.period if self.last_step_at is None else min(max(now - self.last_step_at, 0.0), self.max_delay)
+        dt = min(elapsed, 4 * self.period)
         self.last_step_at = now
         self.delay = self.prediction_delay(now) if self.config.predict else 0.0
         try:
             self.state, out = self.controller.step(self.state, self.q, None if self.output_feedback else self.v,
-                                                   operator, dt, self.delay)
+                                                   operator, dt, self.delay, elapsed)
             u_s = out.u_s.tolist() if isinstance(out.u_s, np.ndarray) else out.u_s
             tau = self.wheel_map.wheel_torques(self.q, u_s)
             if not all(math.isfinite(t) for t in tau):

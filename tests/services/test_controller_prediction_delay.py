@@ -21,12 +21,13 @@ def message(frame):
 @pytest.fixture
 def daemon(monkeypatch):
     d = make_daemon()
-    d.delays = []
+    d.delays, d.intervals = [], []
     step = d.controller.step
 
-    def recording_step(state, q, v, operator, dt, delay=0.0):
+    def recording_step(state, q, v, operator, dt, delay=0.0, elapsed=None):
         d.delays.append(delay)
-        return step(state, q, v, operator, dt, delay)
+        d.intervals.append((dt, elapsed))
+        return step(state, q, v, operator, dt, delay, elapsed)
 
     monkeypatch.setattr(d.controller, "step", recording_step)
     return d
@@ -76,6 +77,23 @@ def test_with_torque_at_the_hold_until_the_torques_leave_is_added(daemon, monkey
     feed(daemon, 10.0035, heartbeat=False)
     daemon.tick(10.0041)
     assert daemon.delays[-1] == pytest.approx(0.0006 + 0.003 + 0.0009, abs=1e-12)
+
+
+def test_a_late_tick_gives_the_predictor_the_time_the_last_command_acted_and_the_laws_at_most_four_periods(daemon):
+    """A tick 12 ms after the last one (a stalled host): the torques of the last tick acted those 12 ms, and the
+    step's predictor must run them that long (shared_controller.in_flight); the laws' own integration stays cut
+    to four periods. Intervals beyond the longest delay predicted over are cut to it."""
+    arm(daemon)
+    for now in (10.004, 10.006, 10.018, 10.020, 10.520):
+        feed(daemon, now - 0.0005, heartbeat=False)
+        daemon.tick(now)
+    assert daemon.mode is Mode.RUNNING
+    steps = daemon.intervals[-5:]
+    assert steps[1] == (pytest.approx(0.002), pytest.approx(0.002))
+    assert steps[2] == (pytest.approx(0.008), pytest.approx(0.012))
+    assert steps[3] == (pytest.approx(0.002), pytest.approx(0.002))
+    assert steps[4] == (pytest.approx(0.008), daemon.max_delay)
+    assert daemon.state.held[-4:] == pytest.approx((0.002, 0.012, 0.002, daemon.max_delay))
 
 
 def test_the_delay_is_cut_to_100_ms(daemon):
