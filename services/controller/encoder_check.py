@@ -13,7 +13,8 @@ rejection out. The two values of one `Get_Encoder_Estimates` frame check each ot
 previous frame of the same wheel. The drives sample on a `period` tick (1 ms) and send every
 other tick; how many ticks lie between two received frames is not known (frames get lost, a
 delayed link releases several at once, arrival times say little about sampling times), so the
-check asks whether *some* whole number of periods k = 1 … `max_periods` explains the frame:
+check asks whether *some* whole number of periods k = 1 … `max_periods` (more after a longer gap
+between the two frames' arrivals: a stalled host) explains the frame:
 
 * position: |Δp − ½(v_prev + v)·k·period| ≤ `pos_slack` + `speed_slack`·|v| + ½|v − v_prev|·k·period
   for some k (the increment agrees with the measured speeds over whole sampling ticks; the last
@@ -48,7 +49,7 @@ from .odometry import AxisEstimate
 @dataclass(frozen=True)
 class EncoderCheck:
     period: float = 0.001           # s: the drive samples on a 1 kHz tick (frames every 2 ticks, ± a tick)
-    max_periods: int = 50           # ticks apart the check considers (50 ms: the feedback timeout)
+    max_periods: int = 50           # ticks the check considers beyond the arrival gap (50 ms: the feedback timeout)
     max_accel: float = 600.0        # turns/s²: above the wheels' reach at the 60 N·m torque limit (~500)
     vel_slack: float = 0.5          # turns/s
     pos_slack: float = 0.002        # turns (0.5 mm of wheel travel)
@@ -67,13 +68,14 @@ class EncoderCheck:
             return AxisEstimate(pos, vel, now), None
         epoch = prev.epoch
         v_prev, p_prev = prev.vel_turns_s, prev.pos_turns
-        arrived = min(max(round((now - prev.received) / self.period), 1), self.max_periods)
+        gap = max(round((now - prev.received) / self.period), 0)
+        arrived = min(max(gap, 1), self.max_periods)
         reason = None
         if abs(vel - v_prev) > self.max_accel * max(arrived, 2) * self.period + self.vel_slack:
             reason = "implausible_velocity"
         else:
             tolerance = self.pos_slack + self.speed_slack * max(abs(vel), abs(v_prev))
-            if self._periods(pos - p_prev, v_prev, vel, tolerance) is None:
+            if self._periods(pos - p_prev, v_prev, vel, tolerance, self.max_periods + gap) is None:
                 reason = "implausible_position"
         if reason is not None:
             if rejected_in_a_row + 1 < self.rebaseline_after:
@@ -81,11 +83,14 @@ class EncoderCheck:
             epoch += 1                   # a jump that persists: a new origin
         return AxisEstimate(pos, vel, now, epoch), None
 
-    def _periods(self, increment: float, v_prev: float, vel: float, tolerance: float) -> int | None:
-        """The k in 1 … max_periods whose trapezoid ½(v_prev + v)·k·period is nearest `increment`, if
+    def _periods(self, increment: float, v_prev: float, vel: float, tolerance: float, limit: int) -> int | None:
+        """The k in 1 … `limit` whose trapezoid ½(v_prev + v)·k·period is nearest `increment`, if
         within `tolerance` + ½|v − v_prev|·k·period (for a speed that changes monotonically between
-        the samples the travel lies between v_prev·τ and v·τ: the trapezoid is off by at most that)."""
+        the samples the travel lies between v_prev·τ and v·τ: the trapezoid is off by at most that).
+        `limit`: max_periods beyond the ticks between the two frames' arrivals — a frame delayed by
+        up to max_periods against its predecessor, after however long a gap (a host that stalled:
+        the wheel turned on meanwhile, and its travel over the gap is no new origin)."""
         step = 0.5 * (v_prev + vel) * self.period
-        k = 1 if abs(step) < 1e-12 else min(max(round(increment / step), 1), self.max_periods)
+        k = 1 if abs(step) < 1e-12 else min(max(round(increment / step), 1), limit)
         bound = tolerance + 0.5 * abs(vel - v_prev) * k * self.period
         return k if abs(increment - k * step) <= bound else None

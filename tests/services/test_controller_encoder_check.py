@@ -94,3 +94,37 @@ def test_frames_after_a_gap_or_in_a_burst_are_not_judged_by_their_arrival_time()
     frames[30] = (pos, vel, frames[29][2] + 0.0001)     # released together with its predecessor
     _, reasons = _run(frames)
     assert reasons == [None] * len(frames)
+
+
+def _braking_across_a_stall(stall=0.150):
+    """A wheel braking from 7 turns/s at 20 turns/s², sampled every 2 ms; no frame arrives for `stall` s (a
+    stalled host), then the stream goes on: [(pos, vel, t)]."""
+    frames, pos, vel, t = [], 10.0, 7.0, 0.0
+    while vel > 0.0:
+        if not 0.05 < t < 0.05 + stall:
+            frames.append((pos, vel, t))
+        new_vel = max(vel - 20.0 * PERIOD, 0.0)
+        pos, vel, t = pos + 0.5 * (vel + new_vel) * PERIOD, new_vel, t + PERIOD
+    return frames
+
+
+@pytest.mark.parametrize("stall", [0.06, 0.15, 0.25])
+def test_a_wheel_that_turned_on_while_the_host_stalled_is_no_new_origin(stall):
+    """Frames that stop for longer than the feedback timeout (the controller estops) and come back with the
+    wheel's travel over the gap: that travel is the wheel's, not a drive restart — a new origin would make
+    the controller refuse to arm again until restarted with --pose."""
+    frames = _braking_across_a_stall(stall)
+    assert frames[-1][2] > 0.05 + stall + 0.02          # the stream goes on after the stall
+    last, reasons = _run(frames)
+    assert reasons == [None] * len(frames)
+    assert last.epoch == 0 and last.pos_turns == pytest.approx(frames[-1][0])
+
+
+def test_after_a_stall_a_value_beyond_the_wheels_reach_is_still_dropped():
+    frames = _braking_across_a_stall(0.15)
+    after = next(i for i in range(1, len(frames)) if frames[i][2] - frames[i - 1][2] > 0.1)
+    pos, vel, t = frames[after]
+    frames[after] = (pos + 4.0, vel, t)       # 4 turns more than the wheel turned: more than 7 turns/s for 0.2 s
+    last, reasons = _run(frames)
+    assert reasons[after] == "implausible_position" and reasons[after + 1:] == [None] * (len(frames) - after - 1)
+    assert last.epoch == 0 and last.pos_turns == pytest.approx(frames[-1][0])
