@@ -14,7 +14,8 @@ model of the CAN link and the drives, as `sharedctl robot` and the controller da
   for more than T_w disarms for good and its brake engages; while the daemon runs, it stops every
   drive at its next step once any has tripped (its estop on an axis that reports an error);
 * a hang: no controller step for 1–50 periods (up to T_w) from some period on, then it resumes on
-  fresh feedback, its state as it was, told how long the last torques acted (`FaultLoop.daemon_timing`);
+  fresh feedback, its state as it was, told how long the last torques acted — or, from 40 periods on,
+  estops, as the daemon does (`FaultLoop.daemon_timing`);
 * late ticks: each period's step skipped with a probability (a loaded host), the drives holding the
   last torques meanwhile;
 * a kill: no controller step from some period on; the frames in flight still arrive, each drive
@@ -53,6 +54,7 @@ from sharedctl.backup import omni_backup
 from sharedctl.constraints import FeasibleSet, Polytope
 from sharedctl.human import intent
 from sharedctl.models import OmniRobot
+from sharedctl.services.controller.daemon import SILENCE_MARGIN
 from sharedctl.services.robot.plant import Plant, RobotSimConfig
 from sharedctl.shared_controller import OperatorInput, SharedController
 from sharedctl.sharing import Authority
@@ -64,6 +66,7 @@ PERIOD_MS = round(PERIOD * 1000)
 PHYSICS_MS = 1                       # ms per RK4 step (the robot's 1 kHz), two per period
 CONFIG = RobotSimConfig()
 WATCHDOG_MS = round(CONFIG.watchdog_timeout * 1000)    # T_w = 100 ms
+SILENCE_MS = WATCHDOG_MS - round(SILENCE_MARGIN * 1000)   # the daemon estops after a stall this long (daemon_timing)
 RUN = 3.0                            # s of operator before a fault (or of the whole run)
 AFTER_HANG = 1.0                     # s the loop runs on after a hang
 EXAMPLES = 5                         # per test and law (a run costs 1–3 s)
@@ -137,8 +140,11 @@ class FaultLoop:
     operator: object
     description: str
     #: the daemon's timing (`ControllerDaemon.control`): after periods without a step (a hang, a late tick) the
-    #: step is told how long the last torques acted (`elapsed`), its laws integrating over at most four periods;
-    #: otherwise every step is told one period, what the batched Monte-Carlo loop does (test_montecarlo_loop.py)
+    #: step is told how long the last torques acted (`elapsed`), its laws integrating over at most four periods,
+    #: and a stall of T_w less `SILENCE_MARGIN` or more ends in its estop (`silence_limit`: a drive's watchdog may
+    #: have expired while the others were fed; this loop's estop is instant, where the daemon learns of a trip
+    #: from a heartbeat); otherwise every step is told one period, what the batched Monte-Carlo loop does
+    #: (test_montecarlo_loop.py)
     daemon_timing: bool = False
     oracle: Oracle = field(init=False, repr=False)
 
@@ -177,7 +183,8 @@ class FaultLoop:
         if controller_runs and self.envelope.late and self.ticks.random() < self.envelope.late:
             controller_runs = False           # this period's tick comes late: the drives hold the last torques
         if controller_runs and not self.estopped:
-            if not all(self.armed):
+            silent = 0 if self.last_step is None else (self.k - self.last_step) * PERIOD_MS
+            if not all(self.armed) or (self.daemon_timing and silent >= SILENCE_MS):
                 self.estopped, self.armed, self.torque = True, [False] * 3, [0.0] * 3
             else:
                 self._control()
@@ -370,7 +377,7 @@ def test_a_kill_at_a_random_instant_of_the_approach_stops_inside_a_random_union_
 def test_a_hang_up_to_the_watchdog_time_at_a_random_instant_never_leaves_the_set(law):
     """Random convex sets and unions, a random operator, delay and loss: the controller hung for up
     to T_w at a random instant of the approach, then running on for 1 s (or, when a watchdog
-    tripped, the robot braked to rest): never outside."""
+    tripped or the stall reached the daemon's silence limit, the robot braked to rest): never outside."""
     hot = []
 
     @settings(max_examples=EXAMPLES, **SETTINGS)

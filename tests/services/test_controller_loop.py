@@ -177,9 +177,50 @@ def test_feedback_older_than_50_ms_estops_every_axis_and_stops_commanding(daemon
     daemon.tick(10.0525)
     assert daemon.mode is Mode.ESTOPPED
     assert daemon.master.bus.take() == [cs.Estop(n) for n in (0, 1, 2)]
-    daemon.tick(10.054)
-    assert daemon.master.bus.take() == []
+    daemon.tick(10.0545)
+    assert daemon.master.bus.take() == [cs.Estop(n) for n in (0, 1, 2)]     # the Estop again, no torque
     assert any(e.kind.value == "estop" and "CAN feedback lost" in e.text for e in events(daemon))
+
+
+def test_a_loop_silent_for_the_watchdog_time_less_a_margin_estops_instead_of_driving_on(daemon):
+    """A stall of the controller (a hang, a starved host) near T_w = 0.1 s: with torque frames lost around it, one
+    drive's watchdog may have expired while the others were fed, and driving on would push the robot on the wheels
+    left (a demo with a 99 ms hang, 25 ms of CAN delay and 20 % loss spun the robot 3 rad past its yaw limit). So
+    the first tick after 80 ms without torque frames (T_w less ten periods of frames lost around the stall) estops;
+    a shorter stall resumes."""
+    arm(daemon)
+    feed(daemon, 10.0035)
+    daemon.tick(10.004)
+    assert daemon.mode is Mode.RUNNING and daemon.silence_limit == pytest.approx(0.08)
+    feed(daemon, 10.0830)
+    daemon.tick(10.0835)                   # 79.5 ms without a step: resumes
+    assert daemon.mode is Mode.RUNNING
+    feed(daemon, 10.1635)
+    daemon.master.bus.take()
+    daemon.tick(10.1645)                   # 81 ms
+    assert daemon.mode is Mode.ESTOPPED
+    assert daemon.master.bus.take() == [cs.Estop(n) for n in (0, 1, 2)]
+    assert any(e.kind.value == "estop" and "no torque sent for 81 ms" in e.text for e in events(daemon))
+
+
+def test_the_estop_goes_out_every_tick_for_100_ms_then_every_half_second(daemon):
+    """A lost Estop frame must not leave a drive on its last torque until its watchdog: under 20 % CAN loss one
+    frame misses a given drive one time in five, fifty in a row one time in 10³⁵."""
+    arm(daemon)
+    daemon.master.bus.take()
+    operator(daemon, 1, 10.003, estop=True)
+    daemon.tick(10.004)
+    assert daemon.mode is Mode.ESTOPPED and daemon.master.bus.take() == [cs.Estop(n) for n in (0, 1, 2)]
+    sent_at = []
+    for k in range(1, 320):
+        daemon.tick(10.0045 + 0.002 * k)        # half a period off the burst's end, so no tick lands on it
+        frames = daemon.master.bus.take()
+        assert all(isinstance(f, cs.Estop) for f in frames)
+        if frames:
+            assert frames == [cs.Estop(n) for n in (0, 1, 2)]
+            sent_at.append(k)
+    # every tick up to 100 ms after the estop, then 0.5 s after the last of them
+    assert sent_at == list(range(1, 50)) + [49 + 250]
 
 
 def test_an_axis_error_while_running_estops(daemon):
