@@ -507,6 +507,11 @@ def govern(backup: BackupModel, model, feasible, q: np.ndarray, v: np.ndarray, u
     return Governed(u + share * (u_g - u), share, True)
 
 
+def command_spans(dt, count: int) -> tuple:
+    """How long each of `count` commands was held: one period dt repeated, or dt itself (one span per command)."""
+    return (dt,) * count if isinstance(dt, (int, float)) else tuple(dt)
+
+
 def uncertain_prediction(backup: BackupModel, model, q, v, slack, commands, dt):
     """(q, v, slack, offset) after `commands` (oldest first), each held dt (a period, or one per command:
     shared_controller.in_flight's spans), from a state whose velocity
@@ -524,7 +529,7 @@ def uncertain_prediction(backup: BackupModel, model, q, v, slack, commands, dt):
     q, v = np.asarray(q, float), np.asarray(v, float)
     eps = [float(e) for e in slack]
     offset = [0.0] * len(backup.blocks)
-    spans = (dt,) * len(commands) if isinstance(dt, (int, float)) else tuple(dt)
+    spans = command_spans(dt, len(commands))
     axes = [tuple(block.axes) for block in backup.blocks]
     spread = getattr(backup.hold_deviation, "acceleration_spread", None)
     by_block = getattr(backup.hold_deviation, "by_block", None)

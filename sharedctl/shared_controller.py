@@ -17,7 +17,7 @@ from functools import cached_property
 
 import numpy as np
 
-from .backup import BackupModel, govern, speed_aware_rows, uncertain_prediction
+from .backup import BackupModel, command_spans, govern, speed_aware_rows, uncertain_prediction
 from .constraints import FeasibleSet
 from .models import EulerLagrangeModel
 from .reference import ReferenceShape
@@ -278,16 +278,11 @@ def predict(model, q, v, commands, dt):
     first-order step differ from the truth; the error over a delay L grows like L² times the force
     error over the mass, a margin docs/control.md §10 sizes."""
     q, v = np.asarray(q, float), np.asarray(v, float)
-    for u, h in zip(commands, _spans(dt, len(commands))):
+    for u, h in zip(commands, command_spans(dt, len(commands))):
         a = model.acceleration(q, v, u)
         q = q + h * v + (0.5 * h * h) * a
         v = v + h * a
     return q, v
-
-
-def _spans(dt, count: int):
-    """dt for each of `count` commands: one period repeated, or the given spans."""
-    return (dt,) * count if isinstance(dt, (int, float)) else tuple(dt)
 
 
 _EMPTY = np.zeros(0)
