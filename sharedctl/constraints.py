@@ -187,6 +187,22 @@ class FeasibleSet:
         K = rows.K_floats
         return [kq + t for kq, t in zip(matvec(K, _as_list(q)), rows.T_floats)], matvec(K, _as_list(v))
 
+    @property
+    def row_ids(self) -> tuple[int, ...]:
+        """Each stacked row's distinct id: rows equal in k and t (a face two polytopes share) have one id,
+        numbered in the order of first appearance."""
+        cached = self.__dict__.get("_row_ids_cache")
+        if cached is None:
+            keys: dict = {}
+            cached = tuple(keys.setdefault((tuple(r.K[j]), float(r.T[j])), len(keys))
+                           for r in self.regions for j in range(r.K.shape[0]))
+            object.__setattr__(self, "_row_ids_cache", cached)
+        return cached
+
+    def row_rates(self, v) -> list:
+        """K v for the rows of every region, stacked as in `row_values`."""
+        return matvec(self._rows.K_floats, _as_list(v))
+
     def group_rows(self, g: int, rows: tuple[list, list]) -> tuple[list, list]:
         """Group g's x = K_g q + T_g and ẋ = K_g v, picked from `rows` = row_values(q, v)."""
         values, rates = rows

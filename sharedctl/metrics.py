@@ -24,7 +24,8 @@ def summarize(trace: Trace, dt: float) -> dict:
     * transparency: among the samples whose true state (q, q̇) — not the observer's v̂ — is in
       the safe set O_s (Definition 2), the share in which u_s = u_h (to TRANSPARENCY_RTOL,
       relative). Below 1 within the minimum dwell of a machine intervention (docs/control.md §6,
-      item 4) and, under output feedback, where (47) classifies (q, v̂) otherwise. None when no
+      item 4), while the operator still pushes at a face the machine took over at (item 1) and,
+      under output feedback, where (47) classifies (q, v̂) otherwise. None when no
       sample is safe or the trace does not record the true class;
     * law_share: among the samples with machine authority (k_s = 0: MACHINE or SHARED), the
       share whose u_f came from a law of the configuration (MachineController.owns: the `of`

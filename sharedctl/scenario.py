@@ -8,7 +8,8 @@ Keys (all SI; see docs/scenarios.md):
   [initial]  q, qdot
   [desired]  kind = "line" (start, velocity) | "circle" (center, radius, omega)
   [human]    kind = "scripted" | "spring", kp, kd
-  [sharing]  mode = "shared" | "machine" | "human", b1, b2, b0, blend_time_constant, min_machine_dwell
+  [sharing]  mode = "shared" | "machine" | "human", b1, b2, b0, blend_time_constant, min_machine_dwell,
+             hold_pushed_faces
   [reference] epsilon, gamma
   [gains.ce] Kp, lam, gamma_theta   [gains.nce] (over [gains.ce]) Kp, lam, gamma_theta, k_q, alpha_n, gamma_n, nu
   [gains.of] K1, k2, gamma_theta, sign_width   [gains.of_barrier] Kp, lam, gamma_theta, barrier_weight
@@ -183,8 +184,11 @@ def build(data: dict, controller: str | None):
     dwell = sharing.get("min_machine_dwell", 0.25)
     if isinstance(dwell, bool) or not isinstance(dwell, (int, float)) or not (0 <= dwell < 1e3):
         raise ScenarioError("sharing.min_machine_dwell must be a number of seconds >= 0")
+    hold = sharing.get("hold_pushed_faces", True)
+    if not isinstance(hold, bool):
+        raise ScenarioError("sharing.hold_pushed_faces must be true or false")
     params = SharingParameters(bands, _number(sharing, "blend_time_constant", 0.3, "sharing.", True),
-                               mode, float(dwell))
+                               mode, float(dwell), hold)
 
     kind_ctrl = controller or data.get("controller", "ce")
     try:

@@ -29,6 +29,7 @@ from .sharing import (
     Mode,
     SharingParameters,
     arbitrate,
+    operator_pushes,
     select_group,
     shared_input,
     push_turned_away,
@@ -144,10 +145,12 @@ class SharedController:
             class_rows = speed_aware_rows(backup, feasible, rows_b, v_b, self.sharing.bands.b2, held, slack, offset)
         every_group = _EveryGroupOnDemand(feasible, np.array(q_list), np.array(v_list), operator.desired,
                                           self.reference, machine.tracking.lam)
+        pushes = operator_pushes(feasible, operator.force)
         arbiter, decision = arbitrate(feasible, self.sharing, state.arbiter, q, v_used, intent, dt,
                                       every_group.lyapunov, every_group, class_rows,
                                       push_turned_away(feasible, q_list, operator.desired.q, operator.force,
-                                                       self.reference.epsilon, self.sharing.bands, class_rows[0]))
+                                                       self.reference.epsilon, self.sharing.bands, class_rows[0],
+                                                       pushes), pushes, float(np.dot(v_used, operator.force)))
 
         theta_hat, law_role, law_state = state.theta_hat, state.law_role, state.law_state
         engaged = decision.authority is not Authority.HUMAN and decision.group is not None

@@ -10,9 +10,11 @@ smooth hand-over (docs/control.md §6). The reading implemented here:
 * **release when the push turns away** — the machine hands authority back as soon as the state is
   safe, *or* the state is not hazardous and the operator's push has turned away (the wish q_d is
   inside Q_a by at least ε and the force u_h pushes towards no face the robot is within b_s of),
-  after the minimum dwell Δt in both cases. While the push lasts, the machine keeps authority and,
-  running its law on the projected reference,
-  brings the robot to rest ε inside the face — in the standoff band of sets.py, which is not
+  after the minimum dwell Δt in both cases, and in neither while u_h still pushes at a face
+  hazardous since the take-over (`held_rows`; `_pushes_at`): released into that push, the operator
+  would drive the state straight back into the hazardous set. While the push lasts, the machine
+  keeps authority and, running its law on the projected reference, brings the robot to rest ε
+  inside the face — in the standoff band of sets.py, which is not
   safe — so an operator pushing out of the set meets one take-over and one release, not a
   pulse train;
 * **the blend** — where k_s = 0 outside the hazardous set, u_s = k_h u_h + k_f u_f, k_f = 1 − k_h,
@@ -66,6 +68,9 @@ class SharingParameters:
     blend_time_constant: float = 0.3      # τ (s) of k_h in the shared hysteresis state
     mode: Mode = Mode.SHARED
     min_machine_dwell: float = 0.25       # Δt (s): shortest machine intervention (Theorem 5's Δt > 0)
+    #: keep authority while the operator pushes at a face hazardous since the take-over (docs/control.md §6);
+    #: False: release in the safe set whatever the push (Theorem 5's claim 3 read literally)
+    hold_pushed_faces: bool = True
 
     def __post_init__(self):
         if self.blend_time_constant <= 0 or self.min_machine_dwell < 0:
@@ -83,6 +88,7 @@ class ArbiterState:
     machine_time: float = 0.0  # seconds since the machine last took over
     switches: int = 0          # authority changes so far
     group_switches: int = 0
+    held_rows: tuple[int, ...] = ()   # the rows hazardous since the machine took over (FeasibleSet.row_ids)
 
 
 class Decision(NamedTuple):
@@ -153,6 +159,8 @@ def arbitrate(
     reference: np.ndarray | None = None,
     rows: tuple[list, list] | None = None,
     push_away: bool = False,
+    pushes: list | None = None,
+    push_power: float = 0.0,
 ) -> tuple[ArbiterState, Decision]:
     """One sample of the sharing function: classify, latch, select, blend.
 
@@ -160,7 +168,12 @@ def arbitrate(
     feedback, (47)). `intent` is v_h of (45). `lyapunov(g)` is evaluated lazily; `reference`
     holds every group's projected reference (see select_group). `rows`: the caller's
     `feasible.row_values(q, v)`, if it has them already. `push_away`: has the operator's push turned
-    away from the faces (push_turned_away)? False (unknown) releases in the safe set only.
+    away from the faces (push_turned_away)? False (unknown) releases in the safe set only. `pushes`:
+    k_j u_h of every row, stacked as in `feasible.row_values` (None: unknown, no row is pushed), and
+    `push_power`: v·u_h. The machine keeps authority while u_h pushes at a face hazardous since it took
+    over (`held_rows`), in every polytope that contains q, safe state or not (`_pushes_at`): released
+    into such a push, the operator would drive the state back into the hazardous set (docs/control.md
+    §6).
     """
     situation = classify(feasible, q, v, params.bands, rows)
     overall = situation.overall
@@ -171,6 +184,9 @@ def arbitrate(
 
     # --- k_s: the Schmitt trigger -------------------------------------------
     latched = state.machine_latched
+    pushing = bool(pushes is not None and state.held_rows and params.hold_pushed_faces and _pushes_at(
+        feasible, state.held_rows, situation.containing, pushes, feasible.row_values(q, v)[0], push_power,
+        params.bands.b2))
     machine_time = state.machine_time + dt if latched else 0.0
     if mode is Mode.MACHINE:
         latched = True
@@ -179,7 +195,7 @@ def arbitrate(
             machine_time = 0.0
         latched = True
     elif (overall is not SetClass.HAZARD and machine_time >= params.min_machine_dwell
-          and (overall is SetClass.SAFE or push_away)):
+          and (overall is SetClass.SAFE or push_away) and not pushing):
         latched = False
     switches = state.switches + (latched != state.machine_latched and mode is Mode.SHARED)
 
@@ -221,11 +237,16 @@ def arbitrate(
     else:
         # latched outside the hazardous set: k_h relaxes towards 1 once the push has turned away, towards
         # 0 (where it stays exactly, from the hazardous set's 0) while it has not
-        target = 1.0 if push_away else 0.0
+        target = 1.0 if push_away and not pushing else 0.0
         k_h = state.k_h + (target - state.k_h) * (1.0 - math.exp(-dt / params.blend_time_constant))
         authority = Authority.MACHINE if k_h == 0.0 else Authority.SHARED
     k_f = 1.0 - k_h
 
+    held_rows = ()
+    if latched and mode is Mode.SHARED:
+        held_rows = state.held_rows if state.machine_latched else ()
+        if overall is SetClass.HAZARD:
+            held_rows = _with_hazard_rows(feasible, held_rows, situation)
     new_state = ArbiterState(      # every field (as dataclasses.replace would, without its overhead)
         machine_latched=latched,
         group=group,
@@ -234,9 +255,39 @@ def arbitrate(
         machine_time=machine_time if latched else 0.0,
         switches=int(switches),
         group_switches=state.group_switches + int(group_changed and state.group is not None),
+        held_rows=held_rows,
     )
     decision = Decision(authority, group, role, k_h, k_f, situation, group_changed, role != state.role)
     return new_state, decision
+
+
+def _pushes_at(feasible: FeasibleSet, held_rows: tuple[int, ...], containing: tuple[int, ...], pushes, values,
+               power: float, far: float) -> bool:
+    """Does u_h push at one of `held_rows` in every polytope containing q? A row is pushed when u_h heads
+    at it (k_j u_h > 0); a row farther than `far` (b2) from its face, hazardous only through the reach of
+    the stop, also when u_h adds kinetic energy (`power` = v·u_h > 0: every reach grows with it).
+    (As for push_turned_away, a union asks for one polytope: a push at a held face of one polytope
+    that lies inside another is not a push out of Q_a.)"""
+    if not containing:
+        return False
+    ids, spans = feasible.row_ids, feasible.row_spans
+    energy = power > 0.0
+    for region in containing:
+        first, end = spans[region]
+        if not any(ids[j] in held_rows and (pushes[j] > 0.0 or energy and values[j] <= -far)
+                   for j in range(first, end)):
+            return False
+    return True
+
+
+def _with_hazard_rows(feasible: FeasibleSet, held_rows: tuple[int, ...], situation: Situation) -> tuple[int, ...]:
+    """`held_rows` and the situation's hazardous rows, as distinct row ids (FeasibleSet.row_ids), sorted."""
+    ids, spans = feasible.row_ids, feasible.row_spans
+    rows = set(held_rows)
+    for region, local in situation.hazard_rows.items():
+        first = spans[region][0]
+        rows.update(ids[first + j] for j in local)
+    return tuple(sorted(rows))
 
 
 def wish_admissible(feasible: FeasibleSet, q_d, epsilon: float) -> bool:
@@ -246,25 +297,34 @@ def wish_admissible(feasible: FeasibleSet, q_d, epsilon: float) -> bool:
     return feasible.margin(np.asarray(q_d, dtype=float)) >= epsilon
 
 
-def push_turned_away(feasible: FeasibleSet, q, q_d, u_h, epsilon: float, bands: Bands, values=None) -> bool:
+def push_turned_away(feasible: FeasibleSet, q, q_d, u_h, epsilon: float, bands: Bands, values=None,
+                     pushes=None) -> bool:
     """Has the operator's push turned away from the faces? The wish is admissible (wish_admissible) and,
     in some polytope that contains q, u_h has no component towards a face the robot is within the
     standoff band of (k_j u_h ≤ 0 for every row with −b_s < k_j q + t_j < 0): both the wish and the
     hand say "back in". (As for the sets, a union asks for one polytope: pushing at a face of one
     polytope that lies inside another is not pushing out of Q_a.) `values`: the row values to judge
     "within the standoff band" by, if not K q + T — the rows seen through the fail-safe stop
-    (backup.speed_aware_rows), so that a push still counts while its stop would end in the band."""
+    (backup.speed_aware_rows), so that a push still counts while its stop would end in the band. `pushes`:
+    k_j u_h of every row, if known (`operator_pushes`)."""
     if not wish_admissible(feasible, q_d, epsilon):
         return False
     standoff = bands.standoff
-    own_values, pushes = feasible.row_values(q, u_h)
-    values = own_values if values is None else values
+    if values is None or pushes is None:
+        own_values, own_pushes = feasible.row_values(q, u_h)
+        values = own_values if values is None else values
+        pushes = own_pushes if pushes is None else pushes
     for first, end in feasible.row_spans:
         x = values[first:end]
         if all(xj < 0.0 for xj in x) and not any(
                 -standoff < xj and push > 0.0 for xj, push in zip(x, pushes[first:end])):
             return True
     return False
+
+
+def operator_pushes(feasible: FeasibleSet, u_h) -> list:
+    """k_j u_h of every row, stacked as in `feasible.row_values`: how hard the operator pushes at each face."""
+    return feasible.row_rates(u_h)
 
 
 def shared_input(decision: Decision, u_h: np.ndarray, u_f: np.ndarray) -> np.ndarray:

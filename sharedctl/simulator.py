@@ -45,6 +45,7 @@ from .sharing import (
     Mode,
     SharingParameters,
     arbitrate,
+    operator_pushes,
     select_group,
     shared_input,
     push_turned_away,
@@ -283,10 +284,12 @@ def simulate(loop: ClosedLoop, q0, v0, duration: float, dt: float) -> Trace:
         ref_ok = feasible.reference_inside(q_r_all)
         wish_inside = wish_admissible(feasible, desired.q, loop.reference.epsilon)
         seen = class_rows(q, v_meas, command.force, observed)
+        pushes = operator_pushes(feasible, command.force)
         push_away = wish_inside and push_turned_away(feasible, q, desired.q, command.force, loop.reference.epsilon,
-                                                     loop.sharing.bands, None if seen is None else seen[0])
+                                                     loop.sharing.bands, None if seen is None else seen[0], pushes)
         arbiter, decision = arbitrate(feasible, loop.sharing, arbiter, q, v_meas, intent, dt,
-                                      values.__getitem__, ref_ok, seen, push_away=push_away)
+                                      values.__getitem__, ref_ok, seen, push_away=push_away, pushes=pushes,
+                                      push_power=float(np.dot(v_meas, command.force)))
         engaged = decision.authority is not Authority.HUMAN and decision.group is not None
         if engaged and (not engaged_before or decision.group_changed or ctrl.law(decision.role) is not law):
             if law is not None and law_state.size:

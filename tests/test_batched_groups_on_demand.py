@@ -68,7 +68,7 @@ def _memory(rng, table):
     G = table.groups
     return ArbiterArrays(rng.random(N) < 0.5, rng.integers(-1, G, N), rng.integers(0, 2, N),
                          rng.choice([0.0, 0.4, 1.0], N), rng.uniform(0.0, 0.6, N), np.zeros(N, np.int64),
-                         np.zeros(N, np.int64))
+                         np.zeros(N, np.int64), rng.random((N, table.row_K.shape[0])) < 0.3)
 
 
 @pytest.mark.parametrize("name,feasible", SETS, ids=[s[0] for s in SETS])

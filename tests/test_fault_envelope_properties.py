@@ -58,6 +58,7 @@ from sharedctl.services.controller.daemon import SILENCE_MARGIN
 from sharedctl.services.robot.plant import Plant, RobotSimConfig
 from sharedctl.shared_controller import OperatorInput, SharedController
 from sharedctl.sharing import Authority
+from sharedctl.transform import Desired
 
 from . import strategies as S
 
@@ -146,6 +147,9 @@ class FaultLoop:
     #: from a heartbeat); otherwise every step is told one period, what the batched Monte-Carlo loop does
     #: (test_montecarlo_loop.py)
     daemon_timing: bool = False
+    #: the console's wish (services/console/operator.py): q_d = q + reach ∘ deflection, at rest, where the
+    #: operator's own wish is otherwise the one the machine sees
+    console_reach: float | None = None
     oracle: Oracle = field(init=False, repr=False)
 
     def __post_init__(self):
@@ -211,7 +215,11 @@ class FaultLoop:
         q, qd = self.feedback[0]
         deflection = np.clip(self.operator.command(t, q, qd).deflection, -1.0, 1.0)      # the wire's range
         kp = self.operator.kp
-        operator = OperatorInput(self.operator.desired(t), kp * deflection, intent(kp, deflection))
+        desired = self.operator.desired(t)
+        if self.console_reach is not None:
+            rest = np.zeros_like(q)
+            desired = Desired(q + self.console_reach * deflection, rest, rest.copy())
+        operator = OperatorInput(desired, kp * deflection, intent(kp, deflection))
         delay = (self.envelope.feedback + self.envelope.transit) * PERIOD
         elapsed = PERIOD
         if self.daemon_timing and self.last_step is not None:
@@ -246,11 +254,11 @@ class FaultLoop:
                 f"q={np.round(q, 4)}")
 
 
-def start(case, law, operator, envelope, daemon_timing=False) -> FaultLoop:
+def start(case, law, operator, envelope, daemon_timing=False, console_reach=None) -> FaultLoop:
     kind, seed = operator
     build = S.face_rush_operator if kind == "rush" else S.random_deflection_operator
     human, description = build(case, seed)
-    return FaultLoop(case, law, envelope, human, description, daemon_timing)
+    return FaultLoop(case, law, envelope, human, description, daemon_timing, console_reach)
 
 
 def periods(seconds: float) -> int:

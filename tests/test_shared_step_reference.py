@@ -9,6 +9,7 @@ largest magnitude), and every discrete decision exactly.
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -36,7 +37,9 @@ PERIOD, RUNS = _runs()
 
 def replay(run, recorded):
     loop, q0, _ = parse(run["scenario"]).closed_loop(run["law"])
-    ctrl = SharedController(loop.model, loop.feasible, loop.controller, loop.sharing, loop.reference)
+    # recorded with the release in the safe set whatever the push (tests/test_handover.py holds the hold rule)
+    sharing = replace(loop.sharing, hold_pushed_faces=False)
+    ctrl = SharedController(loop.model, loop.feasible, loop.controller, sharing, loop.reference)
     state = ctrl.initial_state(q0, loop.theta_hat0)
     feedback = loop.controller.observer is None
     got = {s: [] for s in CONTINUOUS + DISCRETE}

@@ -343,10 +343,12 @@ PUSH = S.push_case(100.0, 2.0)
 NO_STANDOFF = Bands(standoff=Bands().b0)
 
 
-def interventions(dt, dwell, bands=NO_STANDOFF):
+def interventions(dt, dwell, bands=NO_STANDOFF, hold=True):
     """Take-overs of the push run; by default without the standoff band (b_s = b0), where the machine's
-    rest point ε inside the face is safe and the Schmitt trigger alone decides."""
-    trace = S.run(PUSH, "ce", dt=dt, sharing=SharingParameters(bands=bands, min_machine_dwell=dwell))
+    rest point ε inside the face is safe and the Schmitt trigger alone decides; `hold`: the machine keeps
+    authority while the push heads at a face hazardous since its take-over (False: the safe set releases)."""
+    sharing = SharingParameters(bands=bands, min_machine_dwell=dwell, hold_pushed_faces=hold)
+    trace = S.run(PUSH, "ce", dt=dt, sharing=sharing)
     assert S.invariance_failure(PUSH, "ce", trace, dt=dt) is None
     return S.takeover_samples(trace).size
 
@@ -364,11 +366,20 @@ def test_switch_count_does_not_grow_when_the_sample_rate_doubles():
 def test_literal_law_without_dwell_chatters_more_as_the_sample_rate_grows():
     """The measurement that justifies min_machine_dwell: the printed law (Δt = 0) on the same
     run intervenes many times more often than with the dwell, and more again at dt/2 —
-    the count follows the sample rate (Zeno behaviour in continuous time)."""
-    with_dwell = interventions(2e-3, 0.25)
-    literal_coarse, literal_fine = interventions(2e-3, 0.0), interventions(1e-3, 0.0)
+    the count follows the sample rate (Zeno behaviour in continuous time). Both release in the safe
+    set whatever the push, as Theorem 5's claim 3 reads."""
+    with_dwell = interventions(2e-3, 0.25, hold=False)
+    literal_coarse, literal_fine = interventions(2e-3, 0.0, hold=False), interventions(1e-3, 0.0, hold=False)
     assert literal_coarse >= 5 * with_dwell
     assert literal_fine >= 1.25 * literal_coarse
+
+
+def test_holding_authority_while_the_push_heads_at_the_face_takes_over_once_even_without_dwell_and_band():
+    """The same lean with the printed trigger (no standoff band, no dwell) but the hold of
+    docs/control.md §6: the machine does not hand the robot back into a push at the face it took over
+    at, so the operator leaning on it meets one take-over, at dt and at dt/2."""
+    assert interventions(2e-3, 0.0) == 1
+    assert interventions(1e-3, 0.0) == 1
 
 
 def test_with_the_standoff_band_a_lean_on_a_face_settles_after_at_most_one_rebound():

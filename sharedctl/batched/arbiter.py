@@ -29,13 +29,14 @@ class ArbiterArrays:
     machine_time: np.ndarray
     switches: np.ndarray
     group_switches: np.ndarray
+    held: np.ndarray            # (N, P) bool: sharing.ArbiterState.held_rows over the table's distinct rows
 
     @staticmethod
-    def initial(params: SharingParameters, N: int) -> "ArbiterArrays":
+    def initial(params: SharingParameters, N: int, P: int) -> "ArbiterArrays":
         machine = params.mode is Mode.MACHINE
         return ArbiterArrays(
             np.full(N, machine), np.full(N, -1), np.full(N, TRACKING), np.full(N, 0.0 if machine else 1.0),
-            np.zeros(N), np.zeros(N, dtype=np.int64), np.zeros(N, dtype=np.int64),
+            np.zeros(N), np.zeros(N, dtype=np.int64), np.zeros(N, dtype=np.int64), np.zeros((N, P), bool),
         )
 
     def take(self, index) -> "ArbiterArrays":
@@ -64,14 +65,17 @@ class Decisions:
 
 def arbitrate(table: GroupTable, params: SharingParameters, state: ArbiterArrays, situation: Situation,
               row_x: np.ndarray, missed: np.ndarray, chosen: np.ndarray, intent: np.ndarray, dt: float,
-              push_away: np.ndarray | None = None):
+              push_away: np.ndarray | None = None, pushes: np.ndarray | None = None, raw_x: np.ndarray | None = None,
+              power: np.ndarray | None = None):
     """One sample of the sharing function for every robot; returns (new state, decisions).
 
     `row_x` (P, N) is k q + t of every distinct row, `missed` (G, N) the hazardous rows each group
     misses and `chosen` (N,) the result of select_group for this sample — or a function that gives it
     for the robots of a mask (N,) bool (−1 elsewhere), asked only for the robots whose group is chosen
     anew; `push_away` (N,): has each operator's push turned away (sharing.push_turned_away; None:
-    unknown, release in the safe set only).
+    unknown, release in the safe set only); `pushes` (P, N): k_j u_h of every distinct row, `raw_x` (P, N) their
+    k q + t unmoved by the stop, `power` (N,) v·u_h (None: unknown, no row is pushed; the machine keeps authority
+    while u_h pushes at a held row in every region containing q: sharing._pushes_at).
     """
     N = intent.size
     overall = situation.overall
@@ -87,12 +91,19 @@ def arbitrate(table: GroupTable, params: SharingParameters, state: ArbiterArrays
 
     # k_s: the Schmitt trigger
     before = state.latched
+    if pushes is None or not params.hold_pushed_faces:
+        pushing = np.zeros(N, bool)
+    else:
+        row_pushed = (pushes > 0.0) | ((raw_x <= -params.bands.b2) & (power > 0.0)[None])
+        pushed = (table.region_sel @ (state.held.T & row_pushed)) > 0.0      # (R, N): a held row pushed
+        containing = situation.containing
+        pushing = containing.any(axis=0) & np.all(~containing | pushed, axis=0)
     machine_time = np.where(before, state.machine_time + dt, 0.0)
     if mode is Mode.MACHINE:
         latched = np.ones(N, bool)
     else:
         machine_time = np.where(hazard & ~before, 0.0, machine_time)
-        release = ~hazard & (machine_time >= params.min_machine_dwell) & (safe | wish_ok)
+        release = ~hazard & (machine_time >= params.min_machine_dwell) & (safe | wish_ok) & ~pushing
         latched = (before | hazard) & ~release
     switches = state.switches + ((latched != before) & (mode is Mode.SHARED))
 
@@ -121,11 +132,18 @@ def arbitrate(table: GroupTable, params: SharingParameters, state: ArbiterArrays
 
     # weights
     machine = np.full(N, mode is Mode.MACHINE) | hazard
-    target = wish_ok.astype(float)
+    target = (wish_ok & ~pushing).astype(float)
     blend = state.k_h + (target - state.k_h) * (1.0 - math.exp(-dt / params.blend_time_constant))
     k_h = np.where(~latched, 1.0, np.where(machine, 0.0, blend))
     authority = np.where(~latched, HUMAN, np.where(k_h == 0.0, MACHINE, SHARED))
 
+    # the rows hazardous since the take-over, of the regions containing q (sharing._with_hazard_rows)
+    if mode is Mode.SHARED:
+        kept = state.held & (latched & before)[:, None]
+        hazardous = situation.hazard_rows & ((table.region_sel.T @ situation.containing) > 0.0)
+        held = kept | (hazardous & (latched & hazard)[None]).T
+    else:
+        held = np.zeros_like(state.held)
     new = ArbiterArrays(latched, group, role, k_h, np.where(latched, machine_time, 0.0), switches,
-                        state.group_switches + (group_changed & has_old))
+                        state.group_switches + (group_changed & has_old), held)
     return new, Decisions(authority, group, role, k_h, 1.0 - k_h, overall, group_changed, role != state.role)

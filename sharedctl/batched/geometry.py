@@ -251,11 +251,12 @@ def wish_admissible(table: GroupTable, qd: np.ndarray, epsilon: float) -> np.nda
     return np.any((table.region_sel @ (m > -epsilon)) == 0.0, axis=0)
 
 
-def push_turned_away(table: GroupTable, row_x: np.ndarray, u_h: np.ndarray, wish_ok: np.ndarray,
+def push_turned_away(table: GroupTable, row_x: np.ndarray, pushes: np.ndarray, wish_ok: np.ndarray,
                      containing: np.ndarray, bands: Bands) -> np.ndarray:
     """(N,): sharing.push_turned_away per robot — the wish admissible (`wish_ok`) and, in some region
-    containing q (`containing`, (R, N)), k_j u_h ≤ 0 on every row with −b_s < k_j q + t_j (`row_x`, (P, N))."""
-    pushing = (row_x > -bands.standoff) & (table.row_K @ u_h > 0.0)
+    containing q (`containing`, (R, N)), k_j u_h ≤ 0 (`pushes`, (P, N): table.row_K @ u_h) on every row
+    with −b_s < k_j q + t_j (`row_x`, (P, N))."""
+    pushing = (row_x > -bands.standoff) & (pushes > 0.0)
     return wish_ok & np.any(containing & ((table.region_sel @ pushing) == 0.0), axis=0)
 
 

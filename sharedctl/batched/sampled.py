@@ -63,8 +63,8 @@ class SampledBatch:
         Y[L.q], Y[L.v], Y[L.theta] = problem.q0, problem.v0, problem.theta_hat0
         if e.observer:
             Y[L.obs] = e.observer.initial_state(problem.q0)
-        self.fleet = Fleet(np.arange(N), Y, ArbiterArrays.initial(e.sharing, N), problem.operators, problem.theta,
-                           Tally.empty(N, e.k))
+        arbiter = ArbiterArrays.initial(e.sharing, N, e.table.row_K.shape[0])
+        self.fleet = Fleet(np.arange(N), Y, arbiter, problem.operators, problem.theta, Tally.empty(N, e.k))
         self.sent = np.zeros((e.n, N * HISTORY))       # the last commands u_s: robot i's ring at [i·H, (i+1)·H)
         self.sent_count = np.zeros(N, dtype=np.int64)  # commands sent so far (the ring's write position mod HISTORY)
         self.recovery_damping = SharedController.recovery_damping       # N s/m

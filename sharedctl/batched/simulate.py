@@ -110,8 +110,8 @@ class Engine:
         Y[L.q], Y[L.v], Y[L.theta] = problem.q0, problem.v0, problem.theta_hat0
         if self.observer:
             Y[L.obs] = self.observer.initial_state(problem.q0)
-        fleet = Fleet(ids, Y, ArbiterArrays.initial(self.sharing, N), problem.operators, problem.theta,
-                      Tally.empty(N, self.k))
+        arbiter = ArbiterArrays.initial(self.sharing, N, self.table.row_K.shape[0])
+        fleet = Fleet(ids, Y, arbiter, problem.operators, problem.theta, Tally.empty(N, self.k))
         for k in range(steps):
             if fleet.size == 0:
                 break

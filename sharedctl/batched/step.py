@@ -156,9 +156,10 @@ class StepKernel:
                 return out
         else:
             chosen = select_group(table, situation, groups.value, missed, ref_ok)
-        push_away = push_turned_away(table, seen, u_h0, wish_ok, situation.containing, e.sharing.bands)
+        pushes = table.row_K @ u_h0
+        push_away = push_turned_away(table, seen, pushes, wish_ok, situation.containing, e.sharing.bands)
         fleet.arbiter, dec = arbitrate(table, e.sharing, fleet.arbiter, situation, seen, missed, chosen,
-                                       intent, dt, push_away)
+                                       intent, dt, push_away, pushes, groups.rows.x, np.sum(v_meas * u_h0, axis=0))
         return groups, situation, None if on_demand else chosen, dec
 
     def engage(self, fleet, dec, engaged, groups, theta_hat, law_state) -> None:

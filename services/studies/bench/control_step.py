@@ -22,7 +22,7 @@ import numpy as np
 
 from sharedctl.sampled import simulate_sampled
 from sharedctl.scenario import parse
-from sharedctl.sharing import Authority, arbitrate, push_turned_away
+from sharedctl.sharing import Authority, arbitrate, operator_pushes, push_turned_away
 from sharedctl.shared_controller import OperatorInput, SharedController
 from sharedctl.transform import all_groups, coordinates
 
@@ -141,10 +141,8 @@ def breakdown(law: str = "ce", repeats: int = 2000) -> dict:
     law_ = machine.law(state.law_role)
     parts = {
         "row_values": lambda: feasible.row_values(q_list, v_list),
-        "arbitrate": lambda: arbitrate(feasible, loop.sharing, state.arbiter, q, v_used, operator.intent, PERIOD,
-                                       values.__getitem__, [True] * len(values), rows,
-                                       push_turned_away(feasible, q_list, operator.desired.q, operator.force,
-                                                        reference.epsilon, loop.sharing.bands)),
+        "arbitrate": lambda: _arbitrate(feasible, loop.sharing, state.arbiter, q, v_used, operator, values, rows,
+                                        reference),
         "coordinates": lambda: coordinates(grp, q_list, v_list, operator.desired, reference, group_rows),
         "law_evaluate": lambda: law_.evaluate(loop.model, grp, c, q, v_used, state.theta_hat, state.law_state),
         "region_margins": lambda: feasible.region_margins(q, rows[0]),
@@ -154,6 +152,15 @@ def breakdown(law: str = "ce", repeats: int = 2000) -> dict:
         "whole_step": lambda: controller.step(state, q, v if feedback else None, operator, PERIOD),
     }
     return {name: _median_us(fn, repeats) for name, fn in parts.items()}
+
+
+def _arbitrate(feasible, sharing, arbiter, q, v_used, operator, values, rows, reference):
+    """The step's sharing function (SharedController.step): the operator's pushes, push_turned_away, arbitrate."""
+    pushes = operator_pushes(feasible, operator.force)
+    away = push_turned_away(feasible, q.tolist(), operator.desired.q, operator.force, reference.epsilon,
+                            sharing.bands, rows[0], pushes)
+    return arbitrate(feasible, sharing, arbiter, q, v_used, operator.intent, PERIOD, values.__getitem__,
+                     [True] * len(values), rows, away, pushes, float(np.dot(v_used, operator.force)))
 
 
 def floors(batches: int = 200, batch: int = 100) -> dict:
