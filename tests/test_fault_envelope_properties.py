@@ -71,6 +71,7 @@ SILENCE_MS = WATCHDOG_MS - round(SILENCE_MARGIN * 1000)   # the daemon estops af
 RUN = 3.0                            # s of operator before a fault (or of the whole run)
 AFTER_HANG = 1.0                     # s the loop runs on after a hang
 EXAMPLES = 5                         # per test and law (a run costs 1–3 s)
+HANG_EXAMPLES = 8                    # the hangs' (a random instant of the approach: more draws to meet it at speed)
 KILLS, KILL_SPACING = 50, 10         # kills per run at most, periods apart (a stop costs ~0.02 s)
 HOT_SHARE = 0.4                      # of the examples, at least, at a face at speed
 # "at a face at speed": approached faster than FAST (m/s; rad/s at a ψ face), less than CLOSING away at that rate
@@ -124,6 +125,10 @@ class Envelope:
 
 envelopes = st.builds(Envelope, st.integers(0, 13), st.integers(0, 12), st.floats(0.0, 0.2), S.seeds)
 operators = st.tuples(st.sampled_from(("rush", "random")), S.seeds)
+#: the hangs' operators: random deflections three times in four. They bring the robot to a face at speed under
+#: every law, where a rush under output feedback meets the machine 1–1.5 m out, which holds it while the push
+#: lasts (docs/control.md §6) and brings it in slowly: a hang on such an approach comes at no speed
+hang_operators = st.one_of(st.tuples(st.just("random"), S.seeds), operators)
 #: periods without a step: any up to T_w, and often the longest, 49 (the drives hold on) and 50 (the
 #: watchdogs trip: the drives disarm, and the daemon stops them all when it resumes)
 hang_lengths = st.sampled_from((WATCHDOG_MS // PERIOD_MS - 1, WATCHDOG_MS // PERIOD_MS)) | st.integers(
@@ -388,8 +393,8 @@ def test_a_hang_up_to_the_watchdog_time_at_a_random_instant_never_leaves_the_set
     tripped or the stall reached the daemon's silence limit, the robot braked to rest): never outside."""
     hot = []
 
-    @settings(max_examples=EXAMPLES, **SETTINGS)
-    @given(case=st.one_of(S.convex_cases, S.union_cases), operator=operators, envelope=envelopes,
+    @settings(max_examples=HANG_EXAMPLES, **SETTINGS)
+    @given(case=st.one_of(S.convex_cases, S.union_cases), operator=hang_operators, envelope=envelopes,
            instant=st.floats(0.0, 1.0), length=hang_lengths)
     def check(case, operator, envelope, instant, length):
         base, forks = run_with_forks(case, law, operator, envelope, daemon_timing=True)
