@@ -55,16 +55,13 @@ class GroupTable:
     def of(feasible: FeasibleSet) -> "GroupTable":
         st = feasible.stack
         G, n = st.K.shape[0], st.K.shape[1]
-        keys: dict = {}
-        region_rows = []
-        for region in feasible.regions:
-            idx = [keys.setdefault((tuple(region.K[j]), float(region.T[j])), len(keys))
-                   for j in range(region.K.shape[0])]
-            region_rows.append(np.array(idx, dtype=int))
-        P = len(keys)
+        ids = feasible.row_ids            # the distinct rows, numbered as the scalar arbiter's held rows
+        region_rows = [np.array(ids[a:b], dtype=int) for a, b in feasible.row_spans]
+        P = max(ids) + 1
         row_K, row_T = np.zeros((P, n)), np.zeros((P, 1))
-        for (k_row, t), i in keys.items():
-            row_K[i], row_T[i, 0] = k_row, t
+        stacked_K, stacked_T = feasible.row_matrix, np.concatenate([r.T for r in feasible.regions])
+        for j, i in enumerate(ids):
+            row_K[i], row_T[i, 0] = stacked_K[j], stacked_T[j]
         region_of = np.array([g.region for g in feasible.groups], dtype=int)
         group_rows = np.array([region_rows[g.region][list(g.rows)] for g in feasible.groups], dtype=int)
         group_sel, missed_sel = np.zeros((G, P)), np.zeros((G, P))
