@@ -380,10 +380,9 @@ def _uncertain_command_reach(backup: BackupModel, rows, v, a, slack: list | None
     return _command_rows(backup, _command_plan(backup, v, a, slack, offset), rows, v, a)
 
 
-def _command_plan(backup: BackupModel, v, a, slack, offset, head: tuple | None = None) -> tuple:
-    """`_command_head` (or the one given) and the brakes' plan from v + a T_w."""
-    if head is None:
-        head = _command_head(backup, _block_speeds(backup, v), _block_speeds(backup, a), slack, offset)
+def _command_plan(backup: BackupModel, v, a, slack, offset) -> tuple:
+    """`_command_head` and the brakes' plan from v + a T_w."""
+    head = _command_head(backup, _block_speeds(backup, v), _block_speeds(backup, a), slack, offset)
     ends = _parts(backup, [vj + aj * head[0] for vj, aj in zip(v, a)])
     return _planned(backup, head, ends, [_norm(part) for part in ends])
 
@@ -653,13 +652,14 @@ class _Probe:
     less δ: its sign is all the governor decides on.
 
     `along(a_u, a_g)` gives the root search its merit(λ) on the segment a(λ) = a_u + λ(a_g − a_u).
-    With a hold deviation or a slack, the hold's deviation terms — which depend on a only through the
-    block norms |a_b|, and for the next state's stop through the block speeds |v_b + a_b dt| — and the
-    crude bounds are computed once, at the largest of those norms on the segment (each is convex in λ,
-    so it is the larger of its values at the two ends); every term is nondecreasing in them, so each
-    probe's merit is a lower bound of its exact merit (what it passes, the exact merit passes). The
-    braking speeds, which decide the most, stay exact: a probe costs the brakes' plan and the near
-    rows' dot products. The bounds only sort rows (a larger one computes more rows exactly)."""
+    With a hold deviation or a slack, the crude bounds that sort the rows are computed once, at the
+    largest block norms |a_b| on the segment (each is convex in λ, so it is the larger of its values at
+    the two ends): a larger bound only computes more rows exactly, so each probe's sign is its exact
+    merit's. Everything that decides the sign — the hold's deviation terms, the next state's slack and
+    its stop — is computed at a(λ) itself. (Bounded at the segment's largest norms too, those terms
+    would fail every blend of a command whose own deviation is large: the yaw's grows with |a_ψ|, and
+    a holding machine's law asking for (−302, 370, 342) N, N·m far from its reference would have the
+    fallback sent at every sample while the robot stands still, docs/control.md §10.)"""
 
     __slots__ = ("backup", "regions", "q", "v", "dt", "slack", "offset", "uncertain", "speeds", "eps", "eta")
 
@@ -674,7 +674,7 @@ class _Probe:
             self.eta = _spread(backup, self.speeds, slack)
 
     def merit(self, a: list, bounds: list) -> float:
-        return self._merit(a, self._split(bounds), None)
+        return self._merit(a, self._split(bounds))
 
     def along(self, a_u: list, a_g: list):
         """merit(λ) of a(λ) = a_u + λ(a_g − a_u) (see the class)."""
@@ -686,21 +686,10 @@ class _Probe:
         if not self.uncertain:
             backup, v, dt = self.backup, self.v, self.dt
             return lambda lam: self.merit(at(lam), _block_bounds(backup, v, at(lam), dt))
-        fixed = self._segment(a_u, a_g)
-        return lambda lam: self._merit(at(lam), fixed[0], fixed)
-
-    def _segment(self, a_u: list, a_g: list) -> tuple:
-        """(split, command head, next-state moves, next-state slack, next-state head) at the segment's
-        largest norms."""
-        backup, v, dt = self.backup, self.v, self.dt
+        backup = self.backup
         held = [max(x, y) for x, y in zip(_block_speeds(backup, a_u), _block_speeds(backup, a_g))]
-        fastest = [max(x, y) for x, y in zip(_block_speeds(backup, [vi + ai * dt for vi, ai in zip(v, a_u)]),
-                                             _block_speeds(backup, [vi + ai * dt for vi, ai in zip(v, a_g)]))]
-        command = _command_head(backup, self.speeds, held, self.slack, self.offset)
-        moved, slack1 = self._next_uncertainty(held)
-        state = _state_head(backup, fastest, slack1, None, self.slack is not None)
-        bounds = _uncertain_bounds_at(backup, self.speeds, held, dt, self.slack, self.offset)
-        return self._split(bounds), command, moved, slack1, state
+        split = self._split(_uncertain_bounds_at(backup, self.speeds, held, self.dt, self.slack, self.offset))
+        return lambda lam: self._merit(at(lam), split)
 
     def _split(self, bounds: list) -> list:
         """Per polytope (rows, row values, the near rows, their subset, far): `far` the least bound of
@@ -718,7 +707,7 @@ class _Probe:
             split.append((rows, x, near, [rows[j] for j in near], far))
         return split
 
-    def _merit(self, a: list, split: list, fixed) -> float:
+    def _merit(self, a: list, split: list) -> float:
         backup, q, v, dt, slack, offset = self.backup, self.q, self.v, self.dt, self.slack, self.offset
         delta = backup.margin
         command = -math.inf
@@ -729,7 +718,7 @@ class _Probe:
                 if near:
                     if self.uncertain:
                         if plan is None:
-                            plan = _command_plan(backup, v, a, slack, offset, None if fixed is None else fixed[1])
+                            plan = _command_plan(backup, v, a, slack, offset)
                         reach = _command_rows(backup, plan, subset, v, a)
                     else:
                         reach = _command_reach(backup, subset, v, a)
@@ -740,7 +729,7 @@ class _Probe:
         q1 = [qi + vi * dt + 0.5 * ai * dt * dt for qi, vi, ai in zip(q, v, a)]
         v1 = [vi + ai * dt for vi, ai in zip(v, a)]
         if self.uncertain:
-            return min(command, self._uncertain_state(split, q1, v1, a, fixed)) - delta
+            return min(command, self._uncertain_state(split, q1, v1, a)) - delta
         state = -math.inf
         for rows, _, near, subset, far in split:
             x1 = [_dot(rows[j][0], q1) + rows[j][1] for j in near]
@@ -764,7 +753,7 @@ class _Probe:
             moved = [m + p for m, p in zip(moved, self.offset)]
         return moved, [e + h * dt + y for e, h, y in zip(eps, eta, dv)]
 
-    def _uncertain_state(self, split, q1, v1, a, fixed) -> float:
+    def _uncertain_state(self, split, q1, v1, a) -> float:
         """The next state's backup margin when the period departs from constant acceleration by
         (x_b, y_b) = the hold deviation over dt, and the position is known to within p_b (`offset`),
         the velocity to within ε_b (`slack`), the acceleration to within η_b: every row value
@@ -774,11 +763,7 @@ class _Probe:
         it), at its estimate under output feedback."""
         backup = self.backup
         n = len(backup.blocks)
-        if fixed is None:
-            moved, slack1 = self._next_uncertainty(_block_speeds(backup, a))
-            head = None
-        else:
-            _, _, moved, slack1, head = fixed
+        moved, slack1 = self._next_uncertainty(_block_speeds(backup, a))
         blocks = _parts(backup, v1)
         plan = None
         state = -math.inf
@@ -796,8 +781,7 @@ class _Probe:
             if near:
                 if plan is None:
                     speeds = [_norm(part) for part in blocks]
-                    if head is None:
-                        head = _state_head(backup, speeds, slack1, None, self.slack is not None)
+                    head = _state_head(backup, speeds, slack1, None, self.slack is not None)
                     plan = _planned(backup, head, blocks, speeds)
                 reach = _state_rows(backup, plan, subset, blocks)
                 value = min(value, min(-(xj + r) for xj, r in zip(x1, reach)))

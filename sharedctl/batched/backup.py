@@ -111,12 +111,11 @@ class BackupTable:
         return reach
 
     # ----- a hold that departs from constant acceleration, an uncertain velocity ----------------
-    def _uncertain_state_reach(self, v: np.ndarray, slack, estimated: bool = True, head=None) -> np.ndarray:
-        """backup._uncertain_state_reach per robot; `slack` (B, N) or None; `head`: backup._state_head's
-        terms computed already (the governor's segment), else from |v_b|."""
+    def _uncertain_state_reach(self, v: np.ndarray, slack, estimated: bool = True) -> np.ndarray:
+        """backup._uncertain_state_reach per robot; `slack` (B, N) or None."""
         T = self.model.hold
         speeds = [_speed(v[brake.axes]) for brake in self.brakes]
-        eps, eta, dq, spread = self._state_head(speeds, slack, estimated) if head is None else head
+        eps, eta, dq, spread = self._state_head(speeds, slack, estimated)
         reach = np.zeros((self.row_K.shape[0], v.shape[1]))
         for b, brake in enumerate(self.brakes):
             w = _dot(brake.parts, v[brake.axes])
@@ -142,13 +141,11 @@ class BackupTable:
         dq, dv = self._deviation([s + e for s, e in zip(speeds, eps)], [h + al for h, al in zip(eta, held)], T)
         return eps, eta, dq, [e + h * T + y for e, h, y in zip(eps, eta, dv)]
 
-    def _uncertain_command_reach(self, v: np.ndarray, a: np.ndarray, slack, head=None) -> np.ndarray:
-        """backup._uncertain_command_reach per robot; `head` as in `_uncertain_state_reach`."""
+    def _uncertain_command_reach(self, v: np.ndarray, a: np.ndarray, slack) -> np.ndarray:
+        """backup._uncertain_command_reach per robot."""
         T = self.model.hold
-        if head is None:
-            head = self._command_head([_speed(v[brake.axes]) for brake in self.brakes],
-                                      [_speed(a[brake.axes]) for brake in self.brakes], slack)
-        eps, eta, dq, spread = head
+        eps, eta, dq, spread = self._command_head([_speed(v[brake.axes]) for brake in self.brakes],
+                                                  [_speed(a[brake.axes]) for brake in self.brakes], slack)
         w = _dot(self.row_K, v)
         alpha = _dot(self.row_K, a)
         held = np.zeros_like(w)
@@ -292,22 +289,11 @@ class BackupTable:
         """backup._next_margin: the backup margin of the state one period on under a."""
         return self.state_margin(q + v * dt + 0.5 * a * dt * dt, v + a * dt, slack)
 
-    def _segment(self, v, a_u, a_g, dt: float, slack) -> dict:
-        """backup._Probe._segment per robot: the hold's terms at the segment's largest block norms."""
-        def top(x, y):
-            return [np.where(ny > nx, ny, nx)                        # max(|x_b|, |y_b|)
-                    for nx, ny in zip(self._speeds(x), self._speeds(y))]
-
-        held = top(a_u, a_g)
-        fastest = top(v + a_u * dt, v + a_g * dt)
-        speeds = self._speeds(v)
-        eps = _eps(slack, speeds)
-        eta = self._spread(speeds, slack)
-        _, dv = self._deviation([s + e for s, e in zip(speeds, eps)], [h + al for h, al in zip(eta, held)], dt)
-        slack1 = [e + h * dt + y for e, h, y in zip(eps, eta, dv)]         # as _uncertain_next's
-        return {"held": held, "bounds": self._block_bounds(v, a_u, dt, slack, held),
-                "command": self._command_head(speeds, held, slack),
-                "state": self._state_head(fastest, slack1, slack is not None)}
+    def _segment(self, v, a_u, a_g, dt: float, slack) -> list:
+        """backup._Probe.along's crude bounds per robot, at the segment's largest block norms |a_b|."""
+        held = [np.where(ny > nx, ny, nx)                             # max(|a_u,b|, |a_g,b|)
+                for nx, ny in zip(self._speeds(a_u), self._speeds(a_g))]
+        return self._block_bounds(v, a_u, dt, slack, held)
 
     def _speeds(self, v) -> list:
         """|v_b| per block (N,) each."""
@@ -316,8 +302,8 @@ class BackupTable:
     def _root(self, q, v, x, a, a_g, f_lo, f_hi, dt: float, slack=None, hint=None) -> np.ndarray:
         """backup._root for every robot: regula falsi with the Illinois rule on [lo, hi], the same
         arithmetic, after the hint and its neighbour where 0 < hint < 1; a robot whose bracket is done
-        stops changing. With a hold deviation or a slack, the probes share backup._Probe.along's
-        segment terms."""
+        stops changing. With a hold deviation or a slack, the probes share backup._Probe.along's crude
+        bounds."""
         model = self.model
         step = a_g - a
         segment = (self._segment(v, a, a_g, dt, slack)
@@ -328,7 +314,7 @@ class BackupTable:
         def settle(cols, lam):
             """Probe λ = lam at robots `cols` and move the end of each bracket its verdict replaces."""
             m = self._merit(q[:, cols], v[:, cols], x[:, cols], a[:, cols] + lam * step[:, cols], dt,
-                            _take(slack, cols), None if segment is None else _segment_of(segment, cols))
+                            _take(slack, cols), None if segment is None else [c[cols] for c in segment])
             passed = m >= 0.0
             probes[cols] += 1
             hi[cols], f_hi[cols] = np.where(passed, lam, hi[cols]), np.where(passed, m, f_hi[cols])
@@ -353,7 +339,7 @@ class BackupTable:
             lam = np.where((low < lam) & (lam < h), lam, 0.5 * (low + h))
             lam = _on_grid(lam, low, h)
             m = self._merit(q[:, cols], v[:, cols], x[:, cols], a[:, cols] + lam * step[:, cols], dt,
-                            _take(slack, cols), None if segment is None else _segment_of(segment, cols))
+                            _take(slack, cols), None if segment is None else [c[cols] for c in segment])
             passed = m >= 0.0
             k = kept[cols]
             hi[cols] = np.where(passed, lam, h)
@@ -369,24 +355,20 @@ class BackupTable:
             low, h = lo[cols], hi[cols]
             lam = _on_grid(0.5 * (low + h), low, h)
             m = self._merit(q[:, cols], v[:, cols], x[:, cols], a[:, cols] + lam * step[:, cols], dt,
-                            _take(slack, cols), None if segment is None else _segment_of(segment, cols))
+                            _take(slack, cols), None if segment is None else [c[cols] for c in segment])
             passed = m >= 0.0
             hi[cols] = np.where(passed, lam, h)
             lo[cols] = np.where(passed, low, lam)
         return hi
 
-    def _merit(self, q, v, x, a, dt: float, slack=None, segment=None) -> np.ndarray:
+    def _merit(self, q, v, x, a, dt: float, slack=None, bounds=None) -> np.ndarray:
         """backup._Probe.merit: min(command margin, the next state's backup margin) − δ, or the
         command margin − δ where that fails; a row whose crude bound stays ≤ −δ counts with that
-        bound. `x`: the row values at q. `segment` (`_segment`, these robots'): backup._Probe.along's
-        terms fixed for the root search."""
+        bound. `x`: the row values at q. `bounds` (`_segment`, these robots'): the block bounds that
+        sort the rows, backup._Probe.along's for the root search (default: a's own)."""
         delta = self.model.margin
-        if segment is None:
-            crude = self._crude(self._block_bounds(v, a, dt, slack))
-            command_reach = self.command_reach(v, a, slack)
-        else:
-            crude = self._crude(segment["bounds"])
-            command_reach = self._uncertain_command_reach(v, a, slack, segment["command"])
+        crude = self._crude(self._block_bounds(v, a, dt, slack) if bounds is None else bounds)
+        command_reach = self.command_reach(v, a, slack)
         far = -(x + crude)
         skip = ~(x + crude > -delta)
         command = self.margin(x, command_reach, skip, far)
@@ -396,15 +378,9 @@ class BackupTable:
             qc, vc, ac = q[:, cols], v[:, cols], a[:, cols]
             x1 = self.values(qc + vc * dt + 0.5 * ac * dt * dt)
             v1, slack1 = vc + ac * dt, None
-            if segment is not None:
-                x1, slack1 = self._uncertain_next(x1, vc, ac, dt, _take(slack, cols),
-                                                  [h[cols] for h in segment["held"]])
-                reach = self._uncertain_state_reach(v1, slack1, slack is not None,
-                                                    tuple([e[cols] for e in part] for part in segment["state"]))
-            else:
-                if self.model.hold_deviation is not None or slack is not None:
-                    x1, slack1 = self._uncertain_next(x1, vc, ac, dt, _take(slack, cols))
-                reach = self.state_reach(v1, slack1, slack is not None)
+            if self.model.hold_deviation is not None or slack is not None:
+                x1, slack1 = self._uncertain_next(x1, vc, ac, dt, _take(slack, cols))
+            reach = self.state_reach(v1, slack1, slack is not None)
             sk = skip[:, cols]
             x1 = np.where(sk, -1.0, x1)                    # a row that cannot decide is inside
             state = self.margin(x1, reach, sk, far[:, cols])
@@ -412,14 +388,13 @@ class BackupTable:
             merit[cols] = np.where(state < held, state, held) - delta      # min(command, state)
         return merit
 
-    def _uncertain_next(self, x1, v, a, dt: float, slack, held=None):
+    def _uncertain_next(self, x1, v, a, dt: float, slack):
         """backup._Probe._uncertain_state's row values of the next state (x1 moved by Σ_b |K_j,b| (ε_b dt +
-        ½η_b dt² + x_b)) and its slack ε_b + η_b dt + y_b; `held`: bounds of |a_b| (default |a_b|)."""
+        ½η_b dt² + x_b)) and its slack ε_b + η_b dt + y_b."""
         speeds = [_speed(v[brake.axes]) for brake in self.brakes]
         eps = _eps(slack, speeds)
         eta = self._spread(speeds, slack)
-        if held is None:
-            held = [_speed(a[brake.axes]) for brake in self.brakes]
+        held = [_speed(a[brake.axes]) for brake in self.brakes]
         dq, dv = self._deviation([s + e for s, e in zip(speeds, eps)], [h + al for h, al in zip(eta, held)], dt)
         moved = [e * dt + 0.5 * h * dt * dt + x for e, h, x in zip(eps, eta, dq)]
         for norms, m in zip(self.row_norms, moved):
@@ -494,13 +469,6 @@ class BackupTable:
         out = x.copy()
         out[:, cols] = np.where(near[:, cols], moved, xs)
         return out
-
-
-def _segment_of(segment: dict, cols) -> dict:
-    """The segment terms of the robots `cols`."""
-    return {"held": [h[cols] for h in segment["held"]], "bounds": [c[cols] for c in segment["bounds"]],
-            "command": tuple([e[cols] for e in part] for part in segment["command"]),
-            "state": tuple([e[cols] for e in part] for part in segment["state"])}
 
 
 def _on_grid(lam, lo, hi):

@@ -409,23 +409,21 @@ def _uncertain_next(p, x1, norms, v0, v1, v2, dt, e0, e1, given, h0, h1):
 
 
 @_jit
-def _merit(tables, q, v, x, a0, a1, a2, dt, e0, e1, given, seg, use_seg, scratch):
-    """BackupTable._merit for one robot and acceleration a; `seg` (`_segment`'s 20 terms) when `use_seg`.
-    `scratch`: (7, P)."""
+def _merit(tables, q, v, x, a0, a1, a2, dt, e0, e1, given, bound0, bound1, use_bounds, scratch):
+    """BackupTable._merit for one robot and acceleration a; the block bounds that sort the rows are
+    (bound0, bound1) when `use_bounds` (`_segment`'s), else a's own. `scratch`: (6, P)."""
     norms, p = tables[2], tables[6]
     delta = p[_DELTA]
     crude, reach, far, x1, value, skip = scratch[0], scratch[1], scratch[2], scratch[3], scratch[4], scratch[5]
     v0, v1, v2 = v[0], v[1], v[2]
-    if use_seg:
-        _crude(tables, seg[2], seg[3], crude)
-        head = (seg[4], seg[5], seg[6], seg[7], seg[8], seg[9], seg[10], seg[11])
+    s0, s1 = _speeds(v0, v1, v2)
+    h0, h1 = _speeds(a0, a1, a2)
+    if use_bounds:
+        _crude(tables, bound0, bound1, crude)
     else:
-        s0, s1 = _speeds(v0, v1, v2)
-        h0, h1 = _speeds(a0, a1, a2)
         c0, c1 = _block_bounds(p, dt, s0, s1, h0, h1, e0, e1, given)
         _crude(tables, c0, c1, crude)
-        head = _command_head(p, s0, s1, h0, h1, e0, e1, given)
-    _command_reach(tables, v0, v1, v2, a0, a1, a2, head, reach)
+    _command_reach(tables, v0, v1, v2, a0, a1, a2, _command_head(p, s0, s1, h0, h1, e0, e1, given), reach)
     P = x.shape[0]
     for j in range(P):
         far[j] = -(x[j] + crude[j])
@@ -436,15 +434,9 @@ def _merit(tables, q, v, x, a0, a1, a2, dt, e0, e1, given, seg, use_seg, scratch
     _values(tables, q[0] + v0 * dt + 0.5 * a0 * dt * dt, q[1] + v1 * dt + 0.5 * a1 * dt * dt,
             q[2] + v2 * dt + 0.5 * a2 * dt * dt, x1)
     n0, n1, n2 = v0 + a0 * dt, v1 + a1 * dt, v2 + a2 * dt
-    if use_seg:
-        _uncertain_next(p, x1, norms, v0, v1, v2, dt, e0, e1, given, seg[0], seg[1])
-        head = (seg[12], seg[13], seg[14], seg[15], seg[16], seg[17], seg[18], seg[19])
-    else:
-        h0, h1 = _speeds(a0, a1, a2)
-        l0, l1 = _uncertain_next(p, x1, norms, v0, v1, v2, dt, e0, e1, given, h0, h1)
-        t0, t1 = _speeds(n0, n1, n2)
-        head = _state_head(p, t0, t1, l0, l1, True, given)
-    _state_reach(tables, n0, n1, n2, head, reach)
+    l0, l1 = _uncertain_next(p, x1, norms, v0, v1, v2, dt, e0, e1, given, h0, h1)
+    t0, t1 = _speeds(n0, n1, n2)
+    _state_reach(tables, n0, n1, n2, _state_head(p, t0, t1, l0, l1, True, given), reach)
     for j in range(P):
         if skip[j] != 0.0:
             x1[j] = -1.0                   # a row that cannot decide is inside
@@ -454,26 +446,13 @@ def _merit(tables, q, v, x, a0, a1, a2, dt, e0, e1, given, seg, use_seg, scratch
 
 @_jit
 def _segment(p, v, a0, a1, a2, g0, g1, g2, dt, e0, e1, given):
-    """BackupTable._segment for one robot: (held (2), block bounds (2), command head (8), state head (8))."""
-    v0, v1, v2 = v[0], v[1], v[2]
+    """BackupTable._segment for one robot: the block bounds at the segment's largest block norms."""
     nx0, nx1 = _speeds(a0, a1, a2)
     ny0, ny1 = _speeds(g0, g1, g2)
     held0 = ny0 if ny0 > nx0 else nx0
     held1 = ny1 if ny1 > nx1 else nx1
-    fx0, fx1 = _speeds(v0 + a0 * dt, v1 + a1 * dt, v2 + a2 * dt)
-    fy0, fy1 = _speeds(v0 + g0 * dt, v1 + g1 * dt, v2 + g2 * dt)
-    fast0 = fy0 if fy0 > fx0 else fx0
-    fast1 = fy1 if fy1 > fx1 else fx1
-    s0, s1 = _speeds(v0, v1, v2)
-    eps0, eps1 = _eps(s0, s1, e0, e1, given)
-    eta0, eta1 = _spread(p, s0, s1, e0, e1, given)
-    _, _, dv0, dv1 = _deviation(p, s0 + eps0, s1 + eps1, eta0 + held0, eta1 + held1, dt)
-    l0, l1 = eps0 + eta0 * dt + dv0, eps1 + eta1 * dt + dv1
-    c0, c1 = _block_bounds(p, dt, s0, s1, held0, held1, e0, e1, given)
-    c = _command_head(p, s0, s1, held0, held1, e0, e1, given)
-    s = _state_head(p, fast0, fast1, l0, l1, True, given)
-    return (held0, held1, c0, c1, c[0], c[1], c[2], c[3], c[4], c[5], c[6], c[7],
-            s[0], s[1], s[2], s[3], s[4], s[5], s[6], s[7])
+    s0, s1 = _speeds(v[0], v[1], v[2])
+    return _block_bounds(p, dt, s0, s1, held0, held1, e0, e1, given)
 
 
 @_jit
@@ -521,7 +500,7 @@ def _root(tables, q, v, x, a, g, f_lo, f_hi, dt, e0, e1, given, seg, scratch, hi
                     break
                 lam = hi - res if m >= 0.0 else lo + res
             m = _merit(tables, q, v, x, a[0] + lam * st0, a[1] + lam * st1, a[2] + lam * st2, dt, e0, e1, given,
-                       seg, True, scratch)
+                       seg[0], seg[1], True, scratch)
             probes -= 1
             if m >= 0.0:
                 hi, f_hi = lam, m
@@ -537,7 +516,7 @@ def _root(tables, q, v, x, a, g, f_lo, f_hi, dt, e0, e1, given, seg, scratch, hi
         lam = lam if lam > lo + res else lo + res
         lam = lam if lam < hi - res else hi - res
         m = _merit(tables, q, v, x, a[0] + lam * st0, a[1] + lam * st1, a[2] + lam * st2, dt, e0, e1, given,
-                   seg, True, scratch)
+                   seg[0], seg[1], True, scratch)
         if m >= 0.0:
             hi, f_hi = lam, m
             f_lo = 0.5 * f_lo if kept < 0 else f_lo
@@ -551,7 +530,7 @@ def _root(tables, q, v, x, a, g, f_lo, f_hi, dt, e0, e1, given, seg, scratch, hi
         lam = lam if lam > lo + res else lo + res
         lam = lam if lam < hi - res else hi - res
         m = _merit(tables, q, v, x, a[0] + lam * st0, a[1] + lam * st1, a[2] + lam * st2, dt, e0, e1, given,
-                   seg, True, scratch)
+                   seg[0], seg[1], True, scratch)
         if m >= 0.0:
             hi = lam
         else:
@@ -570,7 +549,6 @@ def _govern_all(tables, theta, q, v, u, dt, slack, given, hint, sent, share):
     x = np.empty(P)
     qi, vi = np.empty(3), np.empty(3)
     a, g = np.empty(3), np.empty(3)
-    no_segment = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
     for i in range(q.shape[1]):
         for c in range(3):
             qi[c], vi[c], sent[c, i] = q[c, i], v[c, i], u[c, i]
@@ -587,11 +565,11 @@ def _govern_all(tables, theta, q, v, u, dt, slack, given, hint, sent, share):
         c0, c1 = _block_bounds(p, dt, s0, s1, h0, h1, e0, e1, given)
         if _clearly_safe(tables, x, c0, c1) >= delta:
             continue
-        m_u = _merit(tables, qi, vi, x, a[0], a[1], a[2], dt, e0, e1, given, no_segment, False, scratch)
+        m_u = _merit(tables, qi, vi, x, a[0], a[1], a[2], dt, e0, e1, given, 0.0, 0.0, False, scratch)
         if m_u >= 0.0:
             continue
         g[0], g[1], g[2] = _fallback(p, vi[0], vi[1], vi[2])
-        m_g = _merit(tables, qi, vi, x, g[0], g[1], g[2], dt, e0, e1, given, no_segment, False, scratch)
+        m_g = _merit(tables, qi, vi, x, g[0], g[1], g[2], dt, e0, e1, given, 0.0, 0.0, False, scratch)
         psi = vi[2]
         u_g0 = g[0] * m1 + psi * vi[1] * ath                 # regressor_times(v, v, a_g, θ)
         u_g1 = g[1] * m1 - psi * vi[0] * ath
