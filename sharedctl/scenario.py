@@ -1,13 +1,14 @@
 """Scenario files (TOML) → a ready-to-run closed loop. Pure: takes the parsed mapping.
 
-Keys (all SI; see docs/scenarios.md):
+Keys (all SI; see README.md, "SCENARIO.toml"):
   name, duration (s), dt (s)
   [robot]    kind = "omni3" | "arm2", parameter overrides
              (omni3: mass, body_inertia, wheel_inertia, wheel_radius, wheel_distance, delta)
   [[region]] K = [[...], ...], T = [...]    — the feasible set is their union
   [initial]  q, qdot
-  [desired]  kind = "line" (start, velocity) | "circle" (center, radius, omega)
-  [human]    kind = "scripted" | "spring", kp, kd
+  [desired]  kind = "line" (start, velocity) | "point" (at) | "circle" (center, radius, omega)
+  [human]    kind = "scripted" | "spring" | "adversarial" (pushes at the desired start with
+             `deflection` of the handle, default 1), kp, kd
   [sharing]  mode = "shared" | "machine" | "human", b1, b2, b0, blend_time_constant, min_machine_dwell,
              hold_pushed_faces
   [reference] epsilon, gamma
