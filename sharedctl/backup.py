@@ -41,8 +41,9 @@ Coriolis term), and the brakes start faster.
 
 `govern` returns the command to send: u itself when it is backup-safe, else the point of the
 segment from u to the fallback u_g closest to u that is; when not even u_g is (the state is
-outside the envelope: no stop from here ends δ inside), the one of u and u_g whose stop ends
-farther inside. u_g decelerates each block along −v_b at a_c + k S_b + a_extra — harder than the
+outside the envelope: no stop from here ends δ inside), the one of u and u_g after which the state
+one period on has the larger backup margin — but u_g wherever its own stop (held for T_w, then the
+brakes) ends δ inside and u's does not. u_g decelerates each block along −v_b at a_c + k S_b + a_extra — harder than the
 brakes — or stops it within T_w at low speed; under
 u_g the state's backup margin never decreases, so u_g is always available once the state is
 backup-safe (docs/control.md §10 for the argument). Pure: no clocks, no I/O.
@@ -496,9 +497,13 @@ def govern(backup: BackupModel, model, feasible, q: np.ndarray, v: np.ndarray, u
         # outside the envelope (no stop from here ends δ inside whatever is sent): the one of u and
         # u_g after which the state one period on has the larger backup margin — a law braking at its
         # barrier keeps it above u_g's (that braking is what stops the robot when nothing fails), a law
-        # still tracking towards the face does not; u_g never lowers it (§10)
-        if (_next_margin(backup, feasible, q, v, a_u, dt, slack)
-                >= _next_margin(backup, feasible, q, v, a_g, dt, slack)):
+        # still tracking towards the face does not; u_g never lowers it (§10). But where u_g's own stop
+        # (held T_w, then the brakes) ends δ inside and u's does not, u_g: a loss of actuation may follow
+        delta = backup.margin
+        if ((_next_margin(backup, feasible, q, v, a_u, dt, slack)
+                >= _next_margin(backup, feasible, q, v, a_g, dt, slack))
+                and not (backup.command_margin(feasible, q, v, g_list, slack) >= delta
+                         and not backup.command_margin(feasible, q, v, a_u, slack) >= delta)):
             return Governed(u, 0.0, False)
         return Governed(model.inverse_dynamics(q, v, a_g), 1.0, False)
     share = _root(probe.along(a_u, g_list), m_u, m_g, backup, hint)

@@ -194,3 +194,69 @@ def test_every_torque_frame_lost_trips_the_watchdogs_and_the_controller_stops_th
     run = FaultyLoop(BatchProblem.replicate(loop, case.q0[None], case.v0[None]), case.regions, faults).run(200)
     assert not run.armed.any() and run.estopped[0]
     assert run.result().min_margin[0] > 0.0
+
+
+# ----- counterexamples of the Monte-Carlo, kept ---------------------------------------------------
+#: `sharedctl faults montecarlo --runs 100000` (seed 0) runs 16906 and 17404: a random convex set, an
+#: adversarial rush under output feedback, the controller killed at 0.792 s and 0.318 s. A turning robot's
+#: stop curves towards a face it moves away from (the brakes act in the body frame), Definition 2's rate
+#: tests do not flag that face, and the state left the backup-safe set under the operator; the governor,
+#: outside the envelope, sent the law's command (−514, 832, −441) because the state one period on was
+#: better after it, and the drives held it for T_w after the kill: the robot spun past ψ = −π/2 by 1.7 and
+#: 2.0 rad. `sharedctl demo` of run 17404 with `controller.kill_at=0.35` did the same in the processes
+#: (−2.26 m). Outside the envelope the governor now sends u_g wherever u_g's own stop ends δ inside and
+#: u's does not (backup.govern).
+_MC_SET = {"K": [[-0.9902910130509117, -0.139009745955451, 0.0], [-0.10385553925908825, -0.9945923923724753, 0.0],
+                 [0.6675831968368188, -0.7445352075631705, 0.0], [0.8661442604648426, 0.4997940776598008, 0.0],
+                 [-0.393340644770487, 0.9193928089622724, 0.0], [0.0, 0.0, 1.0], [0.0, 0.0, -1.0]],
+           "T": [-2.067412463624726, -2.415127090810289, -1.1248669282801926, -2.395632648272485,
+                 -1.1294158991896344, -1.5707963267948966, -1.5707963267948966]}
+MC_COUNTEREXAMPLES = [   # (q0, the rush's point, k_p, deflection, kill period)
+    ([-0.8708264189591151, -1.7977950811747214, -0.13241111461422825],
+     [1.319452649950673, 1.3385568968935928, -0.2539178812421917], 49.79814059338122, 0.7507037053572578, 396),
+    ([1.6435319070024654, 0.2428537315541206, -0.1164168277735575],
+     [2.721853242861329, 2.0770856049381767, 0.0], 54.38897574036861, 1.0, 159),
+]
+
+
+def _counterexample_loop(q0, target, kp, deflection):
+    from sharedctl.scenario import parse
+    data = {"name": "montecarlo", "duration": 5.0, "dt": 0.001, "robot": {"kind": "omni3"}, "region": [_MC_SET],
+            "initial": {"q": q0, "qdot": [0.0, 0.0, 0.0]}, "desired": {"kind": "point", "at": target},
+            "human": {"kind": "adversarial", "kp": kp, "deflection": deflection}}
+    return parse(data).closed_loop("of")[0]
+
+
+def test_a_kill_after_the_governor_met_an_output_feedback_rush_outside_the_envelope_stops_inside():
+    """The two runs above on the batched loop, each killed at its period, followed to rest: inside."""
+    loops = [_counterexample_loop(*case[:4]) for case in MC_COUNTEREXAMPLES]
+    q0 = np.array([case[0] for case in MC_COUNTEREXAMPLES])
+    problem = BatchProblem.from_loops(loops, q0, np.zeros_like(q0))
+    faults = LoopFaults.none(len(loops)).replace(kill_at=[case[4] for case in MC_COUNTEREXAMPLES])
+    run = FaultyLoop(problem, [(np.array(_MC_SET["K"]), np.array(_MC_SET["T"]))], faults, operator_every=10,
+                     output_feedback=True)
+    with np.errstate(all="ignore"):
+        result = run.run(2500).run_to_rest(3.0).result()
+    assert np.all(result.min_margin > 0.0), result.min_margin
+    assert not run.armed.any(), "both drives' watchdogs tripped after the kill"
+
+
+def test_outside_the_envelope_the_governor_sends_the_fallback_whose_own_stop_ends_inside():
+    """Run 17404's first machine sample (the observer's v̂, the law's command): no stop from here ends δ
+    inside, the state one period on is better after u than after u_g, but u held for T_w ends far outside
+    and u_g held for T_w ends δ inside — u_g goes out."""
+    from sharedctl.backup import _next_margin, govern
+    loop = _counterexample_loop(*MC_COUNTEREXAMPLES[1][:4])
+    backup, model, feasible = loop.backup, loop.model, loop.feasible
+    q = np.array([1.7609657790986382, 0.36475005286954204, 0.03539891385509647])
+    v = np.array([0.7677709010700909, 0.8246145868720203, 0.681330178741912])
+    u = np.array([-514.4253048937281, 832.3293793531927, -441.0219875211198])
+    slack, dt = backup.observer_error, 0.002
+    a_u, a_g = model.acceleration(q, v, u), backup.fallback_acceleration(v)
+    assert backup.state_margin(feasible, q, v, slack) < backup.margin
+    assert _next_margin(backup, feasible, q, v, a_u, dt, slack) >= _next_margin(backup, feasible, q, v, a_g, dt, slack)
+    assert backup.command_margin(feasible, q, v, a_u, slack) < -1.0
+    governed = govern(backup, model, feasible, q, v, u, dt, slack)
+    assert governed.share == 1.0 and not governed.feasible
+    np.testing.assert_allclose(governed.u, model.inverse_dynamics(q, v, a_g))
+    assert backup.command_margin(feasible, q, v, model.acceleration(q, v, governed.u), slack) >= backup.margin

@@ -238,7 +238,7 @@ class BackupTable:
         """backup.govern for every robot (true parameters θ (n_θ, N), q, v, u (n, N); `slack` per block, a
         float or (N,) each, or None; `hint` (N,) or None: each robot's last λ): returns (the command to
         send (n, N), λ (N,)). u where it is backup-safe; where not even u_g is, the one of u and u_g
-        whose stop ends farther inside (λ = 0 or 1); elsewhere u + λ(u_g − u) with λ from backup._root's
+        backup.govern sends there (λ = 0 or 1); elsewhere u + λ(u_g − u) with λ from backup._root's
         regula falsi, every robot its own bracket."""
         if self.compiled is not None:
             return self.compiled.govern(theta, q, v, u, dt, slack, hint)
@@ -268,7 +268,10 @@ class BackupTable:
         if hopeless.size:                                     # backup margin is larger after it (backup.govern)
             qh, vh, sh = q[:, hopeless], v[:, hopeless], _take(slack, hopeless)
             after_u = self._next_margin(qh, vh, a[:, hopeless], dt, sh)
-            hopeless = hopeless[~(after_u >= self._next_margin(qh, vh, a_g[:, hopeless], dt, sh))]
+            keeps_u = ((after_u >= self._next_margin(qh, vh, a_g[:, hopeless], dt, sh))
+                       & ~((self.command_margin(qh, vh, a_g[:, hopeless], sh) >= delta)
+                           & ~(self.command_margin(qh, vh, a[:, hopeless], sh) >= delta)))
+            hopeless = hopeless[~keeps_u]
         if hopeless.size:
             sent[:, cols[hopeless]] = regressor_times(v[:, hopeless], v[:, hopeless], a_g[:, hopeless],
                                                       theta[:, hopeless])

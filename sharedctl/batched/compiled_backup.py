@@ -469,6 +469,17 @@ def _next_margin(tables, q, v, a0, a1, a2, dt, e0, e1, given, scratch):
 
 
 @_jit
+def _command_margin(tables, v, x, a0, a1, a2, e0, e1, given, scratch):
+    """BackupTable.command_margin for one robot (x: its row values)."""
+    p = tables[6]
+    reach, value = scratch[1], scratch[4]
+    s0, s1 = _speeds(v[0], v[1], v[2])
+    h0, h1 = _speeds(a0, a1, a2)
+    _command_reach(tables, v[0], v[1], v[2], a0, a1, a2, _command_head(p, s0, s1, h0, h1, e0, e1, given), reach)
+    return _margin(tables, x, reach, scratch[5], scratch[2], False, value)
+
+
+@_jit
 def _fallback(p, v0, v1, v2):
     """BackupModel.fallback_acceleration a_g for one robot."""
     s0, s1 = _speeds(v0, v1, v2)
@@ -577,7 +588,9 @@ def _govern_all(tables, theta, q, v, u, dt, slack, given, hint, sent, share):
         if not (m_g >= 0.0):             # outside the envelope: u_g where the next state's margin is larger after it
             after_u = _next_margin(tables, qi, vi, a[0], a[1], a[2], dt, e0, e1, given, scratch)
             after_g = _next_margin(tables, qi, vi, g[0], g[1], g[2], dt, e0, e1, given, scratch)
-            if not (after_u >= after_g):
+            held_g = _command_margin(tables, vi, x, g[0], g[1], g[2], e0, e1, given, scratch)
+            held_u = _command_margin(tables, vi, x, a[0], a[1], a[2], e0, e1, given, scratch)
+            if not (after_u >= after_g and not (held_g >= delta and not (held_u >= delta))):
                 sent[0, i], sent[1, i], sent[2, i] = u_g0, u_g1, u_g2
                 share[i] = 1.0
             continue
