@@ -43,10 +43,10 @@ Coriolis term), and the brakes start faster.
 segment from u to the fallback u_g closest to u that is; when not even u_g is (the state is
 outside the envelope: no stop from here ends δ inside), the one of u and u_g after which the state
 one period on has the larger backup margin — but u_g wherever its own stop (held for T_w, then the
-brakes) ends δ inside and u's does not. u_g decelerates each block along −v_b at a_c + k S_b + a_extra — harder than the
-brakes — or stops it within T_w at low speed; under
-u_g the state's backup margin never decreases, so u_g is always available once the state is
-backup-safe (docs/control.md §10 for the argument). Pure: no clocks, no I/O.
+brakes) ends δ inside and u's does not. u_g decelerates each block along −v_b at a_c + k S_b +
+a_extra — harder than the brakes — or stops it within T_w at low speed; under u_g the state's
+backup margin never decreases, so u_g is always available once the state is backup-safe
+(docs/control.md §10 for the argument). Pure: no clocks, no I/O.
 """
 from __future__ import annotations
 

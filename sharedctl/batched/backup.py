@@ -264,8 +264,8 @@ class BackupTable:
         a_g = self.fallback_acceleration(v)
         m_g = self._merit(q, v, x, a_g, dt, slack)
         keep = m_g >= 0.0
-        hopeless = np.flatnonzero(~keep)                      # outside the envelope: u_g where the next state's
-        if hopeless.size:                                     # backup margin is larger after it (backup.govern)
+        hopeless = np.flatnonzero(~keep)                      # outside the envelope: u or u_g as
+        if hopeless.size:                                     # backup.govern chooses
             qh, vh, sh = q[:, hopeless], v[:, hopeless], _take(slack, hopeless)
             after_u = self._next_margin(qh, vh, a[:, hopeless], dt, sh)
             keeps_u = ((after_u >= self._next_margin(qh, vh, a_g[:, hopeless], dt, sh))

@@ -585,7 +585,7 @@ def _govern_all(tables, theta, q, v, u, dt, slack, given, hint, sent, share):
         u_g0 = g[0] * m1 + psi * vi[1] * ath                 # regressor_times(v, v, a_g, θ)
         u_g1 = g[1] * m1 - psi * vi[0] * ath
         u_g2 = g[2] * m3
-        if not (m_g >= 0.0):             # outside the envelope: u_g where the next state's margin is larger after it
+        if not (m_g >= 0.0):             # outside the envelope: u or u_g as backup.govern chooses
             after_u = _next_margin(tables, qi, vi, a[0], a[1], a[2], dt, e0, e1, given, scratch)
             after_g = _next_margin(tables, qi, vi, g[0], g[1], g[2], dt, e0, e1, given, scratch)
             held_g = _command_margin(tables, vi, x, g[0], g[1], g[2], e0, e1, given, scratch)
