@@ -202,8 +202,8 @@ def test_every_torque_frame_lost_trips_the_watchdogs_and_the_controller_stops_th
 #: stop curves towards a face it moves away from (the brakes act in the body frame), Definition 2's rate
 #: tests do not flag that face, and the state left the backup-safe set under the operator; the governor,
 #: outside the envelope, sent the law's command (−514, 832, −441) because the state one period on was
-#: better after it, and the drives held it for T_w after the kill: the robot spun past ψ = −π/2 by 1.7 and
-#: 2.0 rad. `sharedctl demo` of run 17404 with `controller.kill_at=0.35` did the same in the processes
+#: better after it, and the drives held it for T_w after the kill: the robot spun past |ψ| = π/2 by 1.7
+#: and 2.0 rad. `sharedctl demo` of run 17404 with `controller.kill_at=0.35` did the same in the processes
 #: (−2.26 m). Outside the envelope the governor now sends u_g wherever u_g's own stop ends δ inside and
 #: u's does not (backup.govern).
 _MC_SET = {"K": [[-0.9902910130509117, -0.139009745955451, 0.0], [-0.10385553925908825, -0.9945923923724753, 0.0],
