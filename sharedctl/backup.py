@@ -499,11 +499,10 @@ def govern(backup: BackupModel, model, feasible, q: np.ndarray, v: np.ndarray, u
         # barrier keeps it above u_g's (that braking is what stops the robot when nothing fails), a law
         # still tracking towards the face does not; u_g never lowers it (§10). But where u_g's own stop
         # (held T_w, then the brakes) ends δ inside and u's does not, u_g: a loss of actuation may follow
-        delta = backup.margin
-        if ((_next_margin(backup, feasible, q, v, a_u, dt, slack)
-                >= _next_margin(backup, feasible, q, v, a_g, dt, slack))
-                and not (backup.command_margin(feasible, q, v, g_list, slack) >= delta
-                         and not backup.command_margin(feasible, q, v, a_u, slack) >= delta)):
+        if (_next_margin(backup, feasible, q, v, a_u, dt, slack)
+                >= _next_margin(backup, feasible, q, v, a_g, dt, slack)
+                and (backup.command_margin(feasible, q, v, a_u, slack) >= backup.margin
+                     or not backup.command_margin(feasible, q, v, g_list, slack) >= backup.margin)):
             return Governed(u, 0.0, False)
         return Governed(model.inverse_dynamics(q, v, a_g), 1.0, False)
     share = _root(probe.along(a_u, g_list), m_u, m_g, backup, hint)

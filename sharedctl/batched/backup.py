@@ -269,8 +269,8 @@ class BackupTable:
             qh, vh, sh = q[:, hopeless], v[:, hopeless], _take(slack, hopeless)
             after_u = self._next_margin(qh, vh, a[:, hopeless], dt, sh)
             keeps_u = ((after_u >= self._next_margin(qh, vh, a_g[:, hopeless], dt, sh))
-                       & ~((self.command_margin(qh, vh, a_g[:, hopeless], sh) >= delta)
-                           & ~(self.command_margin(qh, vh, a[:, hopeless], sh) >= delta)))
+                       & ((self.command_margin(qh, vh, a[:, hopeless], sh) >= delta)
+                          | ~(self.command_margin(qh, vh, a_g[:, hopeless], sh) >= delta)))
             hopeless = hopeless[~keeps_u]
         if hopeless.size:
             sent[:, cols[hopeless]] = regressor_times(v[:, hopeless], v[:, hopeless], a_g[:, hopeless],

@@ -590,7 +590,7 @@ def _govern_all(tables, theta, q, v, u, dt, slack, given, hint, sent, share):
             after_g = _next_margin(tables, qi, vi, g[0], g[1], g[2], dt, e0, e1, given, scratch)
             held_g = _command_margin(tables, vi, x, g[0], g[1], g[2], e0, e1, given, scratch)
             held_u = _command_margin(tables, vi, x, a[0], a[1], a[2], e0, e1, given, scratch)
-            if not (after_u >= after_g and not (held_g >= delta and not (held_u >= delta))):
+            if not (after_u >= after_g and (held_u >= delta or not (held_g >= delta))):
                 sent[0, i], sent[1, i], sent[2, i] = u_g0, u_g1, u_g2
                 share[i] = 1.0
             continue
