@@ -22,15 +22,16 @@ demo: $(STAMP)
 	mkdir -p out
 	$(BIN)/sharedctl demo --scenario paper_convex --json out/demo.json
 
-# Lint first (configuration in pyproject.toml, [tool.ruff]). Then the pure tests (simulations,
-# codecs) on two workers, a file at a time (the packaged scenarios' runs are computed once per
-# run and shared by the workers: tests/helpers.py); tests that start processes or open sockets
-# (marked `processes`) one at a time afterwards, so their timing is not disturbed by the workers.
-# Each phase lists its slowest tests.
+# Lint first (configuration in pyproject.toml, [tool.ruff]). Then both test phases at once
+# (tests/run_suite.py): the tests that start processes or open sockets (marked `processes`) one
+# at a time in the foreground, and the pure tests (simulations, codecs) on two workers, a file at
+# a time, in the background at the lowest priority — their own session's autogroup at nice 19 —
+# so that they take only the CPU the processes leave and the processes' timing is not disturbed.
+# (The packaged scenarios' runs are computed once per run and shared by the workers:
+# tests/helpers.py.) Each phase lists its slowest tests; the pure phase's report comes last.
 test: $(STAMP)
 	$(BIN)/ruff check .
-	$(BIN)/python -m pytest -n 2 --dist loadfile --durations=15 -m "not processes"
-	$(BIN)/python -m pytest --durations=15 -m processes
+	$(BIN)/python tests/run_suite.py
 
 paper: $(STAMP)
 	$(BIN)/sharedctl paper --out docs/paper
