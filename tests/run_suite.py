@@ -2,11 +2,11 @@
 `processes`) in the foreground, one at a time, and the pure tests (simulations, codecs) on two workers in the
 background, at the lowest priority, so that they take only the CPU the processes leave.
 
-The process tests measure real-time behaviour (a 500 Hz controller, a 1 kHz simulated robot, ms-scale latencies),
-so nothing may compete with them for the CPU. Lowering the pure tests' nice value alone does not do it on a
-kernel with autogroups (`/proc/sys/kernel/sched_autogroup_enabled`): the scheduler then shares the CPU between
-sessions first, and the demo's children each run in a session of their own (services/children.py), so a nice-19
-process in another session still weighs as much as any of them. The pure tests therefore start in a session of
+The process tests measure real-time behaviour (a 500 Hz controller, a 1 kHz simulated robot, ms-scale latencies):
+whatever runs beside them must yield the CPU to them at once. Lowering the pure tests' nice value alone does not do
+it on a kernel with autogroups (`/proc/sys/kernel/sched_autogroup_enabled`): the scheduler then shares the CPU
+between sessions first, and the demo's children each run in a session of their own (services/children.py), so a
+nice-19 process in another session still weighs as much as any of them. The pure tests therefore start in a session of
 their own whose autogroup is set to nice 19 (`background`), and are nice 19 themselves for kernels without
 autogroups.
 
