@@ -255,8 +255,15 @@ def test_sigterm_stops_within_2_s_with_zero_torque_and_idle_to_every_axis(robot,
     elapsed, out, err = sigterm_and_wait(proc)
     assert proc.returncode == 0, err
     assert elapsed < 2.0
+
+    def sent_since_term(n):
+        return [f for _, f in robot.frames((cs.SetInputTorque, cs.SetAxisState), n, since=t_term)]
+
+    # the daemon has exited, but the robot's thread may not have read its last frames off the socket yet
+    wait_for(lambda: all(sent_since_term(n) and isinstance(sent_since_term(n)[-1], cs.SetAxisState) for n in NODES),
+             2.0, "the fake robot to read the daemon's last frames")
     for n in NODES:
-        after = [f for t, f in robot.frames((cs.SetInputTorque, cs.SetAxisState), n, since=t_term)]
+        after = sent_since_term(n)
         assert any(isinstance(f, cs.SetInputTorque) and f.input_torque == 0.0 for f in after)
         assert isinstance(after[-1], cs.SetAxisState) and after[-1].requested_state is AxisState.IDLE
         assert robot.state[n] is AxisState.IDLE

@@ -151,8 +151,15 @@ def test_controller_drives_the_simulated_robot_estops_when_it_goes_silent_and_st
     out, err = controller.communicate(timeout=5)
     assert controller.returncode == 0, err
     assert time.monotonic() - t_term < 2.0
+
+    def sent_since_term(n):
+        return [f for _, f in listener.frames((cs.SetInputTorque, cs.SetAxisState), n, since=t_term)]
+
+    # the controller has exited, but the listener thread may not have read its last frames off the socket yet
+    wait_for(lambda: all(sent_since_term(n) and isinstance(sent_since_term(n)[-1], cs.SetAxisState) for n in NODES),
+             2.0, "the listener to read the controller's last frames")
     for n in NODES:
-        after = [f for _, f in listener.frames((cs.SetInputTorque, cs.SetAxisState), n, since=t_term)]
+        after = sent_since_term(n)
         assert any(isinstance(f, cs.SetInputTorque) and f.input_torque == 0.0 for f in after)
         assert isinstance(after[-1], cs.SetAxisState) and after[-1].requested_state is AxisState.IDLE
     assert read_json(controller.summary_path)["estops"] == 1          # the one when the robot went silent
