@@ -11,6 +11,8 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
+from .controller.priority import session_nice
+
 STOP_TIMEOUT = 2.0        # s a child gets to exit after SIGTERM
 
 
@@ -89,14 +91,16 @@ def udp_receive_buffer_errors() -> int | None:
 
 
 def raise_priority(pid: int, nice: int = -10) -> str:
-    """Give the simulated robot (the plant) the controller's default priority, nice −10, if allowed.
+    """Give the simulated robot (the plant) the controller's default priority, nice −10, if allowed: the
+    process's, and its session's autogroup's (each child leads a session of its own; see
+    services/controller/priority.py on autogroups).
 
     Set right after the start, before the child creates threads (they inherit it)."""
     try:
         os.setpriority(os.PRIO_PROCESS, pid, nice)
-        return f"nice {nice}"
     except (PermissionError, OSError):
         return "normal"
+    return f"nice {nice}" + (" (its session's too)" if session_nice(pid, nice) else "")
 
 
 def free_udp_port() -> int:

@@ -9,6 +9,13 @@ Two steps, so that only the loop thread runs real-time:
   thread that would not.
 Both fall back quietly when the process may not raise its priority; what was obtained is reported.
 
+On a kernel with autogroups (`/proc/sys/kernel/sched_autogroup_enabled`), the scheduler shares the
+CPU between sessions first and by nice only within one: a process that leads a session of its own
+(every child of `demo` does) weighs, at nice −10, no more than a nice-19 batch job in another
+session. `raise_nice` and `raise_priority` (services/children.py) therefore set the nice of the
+process's autogroup as well, when it leads its session (`session_nice`). SCHED_FIFO threads are
+above every autogroup.
+
 A thread of the process that runs Python code the loop may wait for — the metrics server's
 (services/metrics.py), which holds the interpreter lock while it renders a scrape — gets SCHED_FIFO
 too, at `HELPER_PRIORITY`, below the loop's (`make_thread_realtime`): at normal priority, another
@@ -45,9 +52,23 @@ def raise_nice(level: str) -> str:
         current = os.nice(0)
         if current > NICE:
             os.nice(NICE - current)
-        return f"nice {os.nice(0)}"
+        obtained = os.nice(0)
     except (OSError, AttributeError):
         return "normal"
+    return f"nice {obtained}" + (" (its session's too)" if session_nice(os.getpid(), obtained) else "")
+
+
+def session_nice(pid: int, nice: int) -> bool:
+    """The autogroup of `pid`'s session at `nice`, if `pid` leads its session and the kernel has autogroups
+    (module doc); False where it does not, or may not (lowering an autogroup's nice needs CAP_SYS_NICE)."""
+    try:
+        if os.getsid(pid) != pid:
+            return False           # a session another process leads: its group is not this process's to set
+        with open(f"/proc/{pid}/autogroup", "w") as group:
+            group.write(str(nice))
+        return True
+    except OSError:                # no such file (no autogroups), not permitted, or the process is gone
+        return False
 
 
 def make_loop_realtime() -> bool:
