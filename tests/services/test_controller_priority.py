@@ -3,6 +3,7 @@
 Affinity is per thread on Linux, so each case runs in a thread of its own and the test process
 keeps its CPUs. The nice of a process and of its session's autogroup: `raise_nice`, and the
 launchers' `raise_priority` (services/children.py)."""
+import contextlib
 import os
 import subprocess
 import sys
@@ -78,19 +79,26 @@ def _may_lower_nice() -> bool:
         return False
 
 
+@contextlib.contextmanager
+def sleeping_child(**popen):
+    """A `sleep` child of this test, killed and reaped at the end."""
+    child = subprocess.Popen(["sleep", "30"], **popen)
+    try:
+        yield child
+    finally:
+        child.kill()
+        child.wait()
+
+
 @pytest.mark.processes
 @needs_autogroups
 @pytest.mark.skipif(not _may_lower_nice(), reason="lowering a nice value needs CAP_SYS_NICE (root here)")
 def test_a_child_leading_its_own_session_gets_nice_minus_10_for_its_autogroup_too():
-    child = subprocess.Popen(["sleep", "30"], start_new_session=True)
-    try:
+    with sleeping_child(start_new_session=True) as child:
         assert raise_priority(child.pid) == "nice -10 (its session's too)"
         assert os.getpriority(os.PRIO_PROCESS, child.pid) == -10
         assert _group(child.pid).endswith("nice -10")
         assert _group(os.getpid()) != _group(child.pid)          # the launcher's own group untouched
-    finally:
-        child.kill()
-        child.wait()
 
 
 @pytest.mark.processes
@@ -98,14 +106,10 @@ def test_a_child_leading_its_own_session_gets_nice_minus_10_for_its_autogroup_to
 @pytest.mark.skipif(not _may_lower_nice(), reason="lowering a nice value needs CAP_SYS_NICE (root here)")
 def test_a_child_in_the_launchers_session_leaves_that_sessions_group_as_it_was():
     before = _group(os.getpid())
-    child = subprocess.Popen(["sleep", "30"])
-    try:
+    with sleeping_child() as child:
         assert raise_priority(child.pid) == "nice -10"
         assert os.getpriority(os.PRIO_PROCESS, child.pid) == -10
         assert _group(os.getpid()) == before == _group(child.pid)
-    finally:
-        child.kill()
-        child.wait()
 
 
 @pytest.mark.processes
