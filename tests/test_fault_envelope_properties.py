@@ -22,7 +22,8 @@ model of the CAN link and the drives, as `sharedctl robot` and the controller da
   holds its last torque until its watchdog trips, then the brakes stop the robot, followed to rest.
 
 The operators (tests/strategies.py) drive the handle within the joystick's range: a rush at a face
-at full deflection (k_p 20–60 N), or random deflections (which turn the robot too). The oracle of
+at full deflection (k_p 20–60 N), or random deflections (which turn the robot too; under output
+feedback, random deflections alone: `operators_for`). The oracle of
 "inside" is the set's own rows, normalised, on the plant's true q at every 1 ms physics step
 (`Oracle`): it shares no code with the controller, its backup model or FeasibleSet. Faults land
 where they matter: a hang starts at a random instant of the run's approach to a face — its periods
@@ -125,10 +126,20 @@ class Envelope:
 
 envelopes = st.builds(Envelope, st.integers(0, 13), st.integers(0, 12), st.floats(0.0, 0.2), S.seeds)
 operators = st.tuples(st.sampled_from(("rush", "random")), S.seeds)
+random_operators = st.tuples(st.just("random"), S.seeds)
 #: the hangs' operators: random deflections three times in four. They bring the robot to a face at speed under
 #: every law, where a rush under output feedback meets the machine 1–1.5 m out, which holds it while the push
 #: lasts (docs/control.md §6) and brings it in slowly: a hang on such an approach comes at no speed
-hang_operators = st.one_of(st.tuples(st.just("random"), S.seeds), operators)
+hang_operators = st.one_of(random_operators, operators)
+
+
+def operators_for(law: str, mixed=operators):
+    """Under output feedback, random deflections alone: its rushes are held 1–1.5 m out (above), so a share of
+    rushes would leave too few examples at a face at speed for the 40 % the properties ask, on some seeds (a
+    run in four to six of the kills' and of delay and loss's failed it before). Rushes under output feedback
+    with faults are the Monte-Carlo campaign's (tests/test_montecarlo_loop.py) and this file's explicit
+    examples."""
+    return random_operators if law == "of" else mixed
 #: periods without a step: any up to T_w, and often the longest, 49 (the drives hold on) and 50 (the
 #: watchdogs trip: the drives disarm, and the daemon stops them all when it resumes)
 hang_lengths = st.sampled_from((WATCHDOG_MS // PERIOD_MS - 1, WATCHDOG_MS // PERIOD_MS)) | st.integers(
@@ -307,7 +318,7 @@ def _delay_and_loss(cases, law):
     hot = []
 
     @settings(max_examples=EXAMPLES, **SETTINGS)
-    @given(case=cases, operator=operators, envelope=envelopes)
+    @given(case=cases, operator=operators_for(law), envelope=envelopes)
     def check(case, operator, envelope):
         run = start(case, law, operator, envelope).run(periods(RUN))
         hot.append(run.hot and run.acted)
@@ -344,7 +355,7 @@ def test_ticks_that_come_late_on_a_loaded_host_with_delay_and_loss_never_leave_t
     hot = []
 
     @settings(max_examples=EXAMPLES, **SETTINGS)
-    @given(case=st.one_of(S.convex_cases, S.union_cases), operator=operators, envelope=envelopes,
+    @given(case=st.one_of(S.convex_cases, S.union_cases), operator=operators_for(law), envelope=envelopes,
            late=st.floats(0.1, 0.4))
     def check(case, operator, envelope, late):
         run = start(case, law, operator, Envelope(envelope.feedback, envelope.transit, envelope.loss,
@@ -367,7 +378,7 @@ def test_a_kill_at_a_random_instant_of_the_approach_stops_inside_a_random_union_
     hot = []
 
     @settings(max_examples=EXAMPLES, **SETTINGS)
-    @given(case=S.union_cases, operator=operators, envelope=envelopes, instant=st.floats(0.0, 1.0))
+    @given(case=S.union_cases, operator=operators_for(law), envelope=envelopes, instant=st.floats(0.0, 1.0))
     @example(case=S.random_union_case(0), operator=("random", 0), envelope=Envelope(), instant=0.0)     # ce, nce
     @example(case=S.random_union_case(2), operator=("rush", 0), envelope=Envelope(0, 1), instant=0.0)   # of
     def check(case, operator, envelope, instant):
@@ -394,8 +405,8 @@ def test_a_hang_up_to_the_watchdog_time_at_a_random_instant_never_leaves_the_set
     hot = []
 
     @settings(max_examples=HANG_EXAMPLES, **SETTINGS)
-    @given(case=st.one_of(S.convex_cases, S.union_cases), operator=hang_operators, envelope=envelopes,
-           instant=st.floats(0.0, 1.0), length=hang_lengths)
+    @given(case=st.one_of(S.convex_cases, S.union_cases), operator=operators_for(law, hang_operators),
+           envelope=envelopes, instant=st.floats(0.0, 1.0), length=hang_lengths)
     def check(case, operator, envelope, instant, length):
         base, forks = run_with_forks(case, law, operator, envelope, daemon_timing=True)
         k, = approach_instants(base, instant)
