@@ -19,6 +19,8 @@ import pytest
 
 from sharedctl.services.demo.measure import TOLERANCE
 
+from .processes import run_launcher
+
 pytestmark = [pytest.mark.slow, pytest.mark.processes]
 RUNS = {"paper_convex": 20.0, "paper_nonconvex": 30.0}
 # The controller's CAN feedback timeout, relaxed from its default 50 ms: the simulated robot is a
@@ -39,7 +41,7 @@ def alive(pid: int) -> bool:
 
 def run_demo(tmp_path: Path, *args: str, timeout: float = 150.0) -> tuple[subprocess.CompletedProcess, dict]:
     out = tmp_path / "demo.json"
-    proc = subprocess.run(
+    proc = run_launcher(
         [sys.executable, "-m", "sharedctl.services.cli", "demo", "--headless", "--json", str(out),
          "--log-dir", str(tmp_path / "logs"), *args],
         stdin=subprocess.DEVNULL, capture_output=True, text=True, timeout=timeout)

@@ -3,11 +3,12 @@
 shows what was injected, and the run is judged as services/faults/stack.py says
 (0 ground-truth violations, every process not killed on purpose exits cleanly)."""
 import json
-import subprocess
 import sys
 from pathlib import Path
 
 import pytest
+
+from .processes import run_launcher
 
 pytestmark = pytest.mark.processes
 
@@ -21,7 +22,7 @@ def test_demo_with_faults_reports_what_was_injected(tmp_path):
             "--fault-seed", "1"]
     for spec in FAULTS:
         argv += ["--fault", spec]
-    proc = subprocess.run(argv, capture_output=True, timeout=120)
+    proc = run_launcher(argv, capture_output=True, timeout=120)
     summary = json.loads(out.read_text())
     assert summary["faults"] == FAULTS
     assert (summary["injected"]["not_ok"] == [] and summary["ok"] is True
@@ -47,8 +48,8 @@ def test_demo_with_faults_reports_what_was_injected(tmp_path):
 
 
 def test_demo_refuses_a_bad_fault_spec():
-    proc = subprocess.run([sys.executable, "-m", "sharedctl.services.cli", "demo", "--headless",
-                           "--fault", "operator.loss=2"], capture_output=True, timeout=60)
+    proc = run_launcher([sys.executable, "-m", "sharedctl.services.cli", "demo", "--headless",
+                         "--fault", "operator.loss=2"], capture_output=True, timeout=60)
     assert proc.returncode == 2 and b"operator.loss=2" in proc.stderr
 
 
@@ -64,7 +65,7 @@ def test_a_timed_fault_fires_at_its_time_after_the_lease_on_the_controllers_own_
     argv = [sys.executable, "-m", "sharedctl.services.cli", "demo", "--scenario", "adversarial_wall", "--headless",
             "--duration", "2", "--no-reference", "--json", str(out), "--log-dir", str(tmp_path / "logs"),
             "--fault", "operator.estop_at=1.2"]
-    proc = subprocess.run(argv, capture_output=True, timeout=120)
+    proc = run_launcher(argv, capture_output=True, timeout=120)
     summary = json.loads(out.read_text())
     assert summary["run_clock"] == "lease", proc.stderr.decode()[-2000:]
     fired, = summary["injected"]["processes"]

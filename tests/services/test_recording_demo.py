@@ -21,6 +21,8 @@ from sharedctl.services.studies.plot.command import plot_recording
 from sharedctl.services.recording.replay_command import replay, wire_payload
 from sharedctl.services.zenoh_session import free_loopback_port, open_session
 
+from .processes import run_launcher
+
 pytestmark = pytest.mark.processes
 DURATION = 3.0
 ROBOT = "robot1"
@@ -33,7 +35,7 @@ FEEDBACK_TIMEOUT = ("--feedback-timeout-ms", "150")
 def recorded(tmp_path_factory):
     out = tmp_path_factory.mktemp("recorded-demo")
     summary_path = out / "demo.json"
-    proc = subprocess.run(
+    proc = run_launcher(
         [sys.executable, "-m", "sharedctl.services.cli", "demo", "--duration", str(DURATION),
          "--record", str(out / "rec"), "--no-reference", "--headless", "--json", str(summary_path),
          "--log-dir", str(out / "logs"), *FEEDBACK_TIMEOUT],

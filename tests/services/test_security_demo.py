@@ -12,6 +12,8 @@ import sys
 
 import pytest
 
+from .processes import run_launcher
+
 pytestmark = [pytest.mark.processes, pytest.mark.slow]
 
 # as in test_demo_e2e.py: the Python robot's encoder stream pauses 45-70 ms on a shared 2-core
@@ -24,9 +26,9 @@ FEEDBACK_TIMEOUT = ("--feedback-timeout-ms", "150")
 def secure_run(tmp_path_factory):
     tmp = tmp_path_factory.mktemp("secure-demo")
     out = tmp / "demo.json"
-    proc = subprocess.run([sys.executable, "-m", "sharedctl.services.cli", "demo", "--secure", "--headless",
-                           "--no-reference", "--duration", "4", "--json", str(out), "--log-dir", str(tmp / "logs"),
-                           *FEEDBACK_TIMEOUT], stdin=subprocess.DEVNULL, capture_output=True, text=True, timeout=120)
+    proc = run_launcher([sys.executable, "-m", "sharedctl.services.cli", "demo", "--secure", "--headless",
+                         "--no-reference", "--duration", "4", "--json", str(out), "--log-dir", str(tmp / "logs"),
+                         *FEEDBACK_TIMEOUT], stdin=subprocess.DEVNULL, capture_output=True, text=True, timeout=120)
     summary = json.loads(out.read_text()) if out.exists() else {}
     assert summary, f"no summary: {proc.stdout}\n{proc.stderr}"
     return proc, summary, tmp / "logs"

@@ -11,6 +11,8 @@ import sys
 
 import pytest
 
+from .processes import run_launcher
+
 pytestmark = [pytest.mark.processes, pytest.mark.slow]
 
 FAULTS = ("router.restart_at=0.5,0.5", "controller.kill_at=1.5", "controller.restart_at=2.5",
@@ -24,7 +26,7 @@ def test_the_secured_stack_meets_a_router_restart_a_controller_restart_and_an_es
             "--feedback-timeout-ms", "150"]
     for spec in FAULTS:
         argv += ["--fault", spec]
-    proc = subprocess.run(argv, stdin=subprocess.DEVNULL, capture_output=True, text=True, timeout=180)
+    proc = run_launcher(argv, stdin=subprocess.DEVNULL, capture_output=True, text=True, timeout=180)
     summary = json.loads(out.read_text())
     assert summary["failure"] is None and summary["violations"] == 0, proc.stderr
     fired = {p["fault"]: p for p in summary["injected"]["processes"]}
@@ -45,7 +47,7 @@ def test_behind_the_router_unsigned_floods_and_a_replayed_signed_command_move_no
     argv = [sys.executable, "-m", "sharedctl.services.cli", "demo", "--secure", "--headless", "--no-reference",
             "--scenario", "adversarial_wall", "--duration", "3.5", "--json", str(out), "--log-dir", str(tmp_path / "l"),
             "--feedback-timeout-ms", "150", "--fault", "operator.flood_at=1,500,1", "--fault", "operator.evict_at=2.5"]
-    proc = subprocess.run(argv, stdin=subprocess.DEVNULL, capture_output=True, text=True, timeout=180)
+    proc = run_launcher(argv, stdin=subprocess.DEVNULL, capture_output=True, text=True, timeout=180)
     summary = json.loads(out.read_text())
     assert summary["failure"] is None and summary["violations"] == 0, proc.stderr
     flood, evict = (summary["injected"]["intrusions"][k] for k in ("flood", "evict"))
@@ -71,7 +73,7 @@ def test_link_faults_behind_the_routers_reach_the_controller_with_every_message_
             "--scenario", "adversarial_wall", "--duration", "3", "--json", str(out), "--log-dir", str(tmp_path / "l"),
             "--feedback-timeout-ms", "150", "--fault", "operator.corrupt=0.2", "--fault", "operator.replay=0.2,300",
             "--fault", "operator.duplicate=0.2", "--fault", "telemetry.delay_ms=30", "--fault", "telemetry.loss=0.1"]
-    proc = subprocess.run(argv, stdin=subprocess.DEVNULL, capture_output=True, text=True, timeout=180)
+    proc = run_launcher(argv, stdin=subprocess.DEVNULL, capture_output=True, text=True, timeout=180)
     summary = json.loads(out.read_text())
     assert summary["failure"] is None and summary["violations"] == 0, proc.stderr
     assert summary["security"]["console_router"]["exit_code"] == 0
