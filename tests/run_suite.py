@@ -27,6 +27,8 @@ import sys
 import tempfile
 import time
 
+from sharedctl.services.controller.priority import session_nice
+
 PURE = ["-n", "2", "--dist", "loadfile", "--durations=15", "-m", "not processes"]
 PROCESSES = ["--durations=15", "-m", "processes"]
 NICE = 19
@@ -34,12 +36,9 @@ STOP_TIMEOUT = 30.0   # s a phase gets to stop on SIGINT (its fixtures reap thei
 
 
 def background() -> None:
-    """In the child, after its new session began: the session's autogroup and the process at nice 19."""
-    try:
-        with open("/proc/self/autogroup", "w") as group:
-            group.write(str(NICE))
-    except OSError:      # no autogroups in this kernel, or not allowed: the process's own nice still applies
-        pass
+    """In the child, after its new session began: the session's autogroup (where the kernel has them) and the
+    process at nice 19."""
+    session_nice(os.getpid(), NICE)
     os.nice(NICE - os.nice(0))
 
 
